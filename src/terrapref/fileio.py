@@ -220,7 +220,7 @@ def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), 
             raise UserError(
                 str(out), f"holds the input {given}, which a new output would replace; {flag} must name another folder", field=flag
             )
-    if folder and out.exists() and Path.cwd().resolve().is_relative_to(target):  # a folder in use cannot be replaced
+    if folder and out.exists() and _holds_cwd(target):  # a folder in use cannot be replaced
         raise UserError(str(out), f"is the current folder or holds it; {flag} must name a folder elsewhere", field=flag)
     special = _special_file(out)
     if special:
@@ -257,6 +257,15 @@ def check_distinct(inputs: Sequence[str | Path], what: str) -> None:
             same = "" if seen[key] == given else f" (the same as {seen[key]})"
             raise UserError(given, f"is given twice{same}; give each {what} once")
         seen[key] = given
+
+
+def _holds_cwd(folder: Path) -> bool:
+    """Whether the current folder is ``folder`` (resolved) or lies inside it (False where the
+    current folder is gone)."""
+    try:
+        return Path.cwd().resolve().is_relative_to(folder)
+    except OSError:
+        return False
 
 
 def _special_file(path: Path) -> str | None:
