@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -404,36 +405,37 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     assert len(table) == len(summary.zones) + 1 and len({line.index(" -> ") for line in table}) == 1
 
 
-def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path, tiny_recording):
-    # As after Ctrl-C: the old recording stays as it was, the unfinished one is OUT.partial (not
-    # a hidden folder beside it), and the command says it was terminated.
-
-    out = shutil.copytree(tiny_recording, tmp_path / "rec")
-    before = (out / "frames.jsonl").read_bytes()
-    command = [
-        sys.executable,
-        "-c",
-        "import sys; from terrapref.cli import main; sys.exit(main())",
-        "record",
-        "demo_course",
-        "--out",
-        str(out),
-        "--force",
-        "--quiet",
-    ]
-    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _record_terminated(out: Path, ready: Callable[[], bool], *flags: str) -> tuple[int, str]:
+    """``terrapref record demo_course --out OUT FLAGS`` in a fresh interpreter, sent SIGTERM once
+    ``ready()`` (no time limit: the recorder gets there or exits, which fails the test); its exit
+    code and its stderr."""
+    command = [sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "record", "demo_course"]
+    child = subprocess.Popen([*command, "--out", str(out), *flags, "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        # Wait (no time limit: the child either writes 20 frames or exits) for the replacement's frames.
-        while not any(p.name.endswith(".new") and len(list((p / "images").glob("*.png"))) >= 20 for p in tmp_path.iterdir()):
+        while not ready():
             if child.poll() is not None:
-                pytest.fail(f"the recorder exited ({child.returncode}) before 20 frames: {child.stderr.read()}")
+                pytest.fail(f"the recorder exited ({child.returncode}) before it was ready: {child.stderr.read()}")
             time.sleep(0.005)
         child.send_signal(signal.SIGTERM)
         _, err = child.communicate()
     finally:
         child.kill()
         child.wait()
-    assert child.returncode == 143 and "terminated" in err and "Traceback" not in err, err
+    return child.returncode, err
+
+
+def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path, tiny_recording):
+    # As after Ctrl-C: the old recording stays as it was, the unfinished one is OUT.partial (not
+    # a hidden folder beside it), and the command says it was terminated.
+
+    out = shutil.copytree(tiny_recording, tmp_path / "rec")
+    before = (out / "frames.jsonl").read_bytes()
+
+    def twenty_new_frames() -> bool:  # the replacement's, in its hidden folder
+        return any(p.name.endswith(".new") and len(list((p / "images").glob("*.png"))) >= 20 for p in tmp_path.iterdir())
+
+    code, err = _record_terminated(out, twenty_new_frames, "--force")
+    assert code == 143 and "terminated" in err and "Traceback" not in err, err
     assert (out / "frames.jsonl").read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec", "rec.partial"]
     assert read_recording(tmp_path / "rec.partial").complete is False
@@ -443,31 +445,10 @@ def test_a_first_recording_stopped_says_where_its_frames_are(tmp_path):
     """Stopped (SIGTERM, as Ctrl-C), a first recording keeps its frames at OUT, marked partial,
     and says so: it said only "terminated"."""
     out = tmp_path / "rec"
-    command = [
-        sys.executable,
-        "-c",
-        "import sys; from terrapref.cli import main; sys.exit(main())",
-        "record",
-        "demo_course",
-        "--out",
-        str(out),
-        "--quiet",
-    ]
-    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        while (
-            not (out / "frames.jsonl").is_file() or (out / "frames.jsonl").read_text().count("\n") < 20
-        ):  # no time limit: 20 frames or an exit
-            if child.poll() is not None:
-                pytest.fail(f"the recorder exited ({child.returncode}) before 20 frames: {child.stderr.read()}")
-            time.sleep(0.005)
-        child.send_signal(signal.SIGTERM)
-        _, err = child.communicate()
-    finally:
-        child.kill()
-        child.wait()
+    frames = out / "frames.jsonl"  # an image is written before its line: 20 lines are 20 frames
+    code, err = _record_terminated(out, lambda: frames.is_file() and frames.read_text().count("\n") >= 20)
     kept = read_recording(out)
-    assert child.returncode == 143 and not kept.complete and len(kept) >= 20
+    assert code == 143 and not kept.complete and len(kept) >= 20
     assert re.search(rf"note: {re.escape(str(out))} keeps the \d+ frames recorded before it was stopped \(partial\)", err), err
 
 
