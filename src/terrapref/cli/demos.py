@@ -185,11 +185,6 @@ def _cmd_drive(args: argparse.Namespace) -> int:
             check_table(args, riding, args.model)
     scenario = drivable(resolve_scenario(args.scenario, class_table(args) or riding))
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else None
-    from terrapref.demos.session import DriveSetup
-
-    top = DriveSetup.of(scenario, person=True).sim.vehicle.max_speed_mps
-    if not 0.0 < args.speed <= top:
-        raise UserError("--speed", f"expected a speed in (0, {top:g}] m/s, the vehicle's top speed, got {args.speed:g}")
     if args.record is not None:
         check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
     perception = perception_model(args.perception, classes=scenario.classes)

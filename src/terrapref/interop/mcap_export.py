@@ -59,6 +59,7 @@ from terrapref.interop.ros_messages import (
     camera_mount,
     compressed_image,
     depth_image,
+    filter_info_said,
     foxglove_grid,
     grid_map,
     header,
@@ -357,7 +358,7 @@ def _write_costmap(topics: Topics, scene: Scene, t: float, ns: int, costmap: Cos
     if "speed" in costmap.layers and costmap.top_speed_mps is not None:
         mask_topic = COSTMAP_TOPICS["speed_mask"][0]
         info, mask = speed_filter(ts, scene.header(t, "odom"), costmap.layers["speed"], costmap.top_speed_mps, mask_topic)
-        topics.write_changed("speed_filter_info", ns, info, (info.type, info.filter_mask_topic, info.base, info.multiplier))
+        topics.write_changed("speed_filter_info", ns, info, filter_info_said(info))
         topics.write("speed_mask", ns, occupancy_grid(ts, scene.header(t, "odom"), mask, res, origin))
 
 

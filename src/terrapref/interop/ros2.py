@@ -531,7 +531,7 @@ class _Node:
     def publish_costmap(self) -> None:
         """The learned costmap, when the model keeps a ground map, in the odometry's frame; its
         layers as a GridMap, and with a speed rule the learned speed as Nav2's speed filter."""
-        from terrapref.interop.ros_messages import grid_map, occupancy_grid, speed_filter
+        from terrapref.interop.ros_messages import filter_info_said, grid_map, occupancy_grid, speed_filter
 
         grid = self.core.costmap()
         if grid is None:
@@ -542,7 +542,7 @@ class _Node:
         if "speed" in grid.layers and grid.top_speed_mps is not None:
             mask_topic = next(e.topic for e in self.endpoints if e.role == "speed_mask")
             info, mask = speed_filter(self.ts, stamped, grid.layers["speed"], grid.top_speed_mps, mask_topic)
-            said = (info.type, info.filter_mask_topic, info.base, info.multiplier)
+            said = filter_info_said(info)
             if said != self.filter_said:  # Nav2 takes each new info as a new filter: it warns and subscribes again
                 self.writers["speed_filter_info"].publish(info)
                 self.filter_said = said

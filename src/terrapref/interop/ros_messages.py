@@ -370,6 +370,13 @@ def speed_filter(
     return info, mask
 
 
+def filter_info_said(info: Message) -> tuple:
+    """What a speed filter's nav2_msgs/CostmapFilterInfo says, its header aside: Nav2 takes an info
+    that says something else as a new filter (it warns and subscribes to the mask again), so one
+    is sent again only when this changes."""
+    return (info.type, info.filter_mask_topic, info.base, info.multiplier)
+
+
 GRID_FIELDS = (
     ("cost", 0, 2),
     ("red", 1, 1),

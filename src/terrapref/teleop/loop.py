@@ -652,7 +652,7 @@ def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
     scenario = resolve_scenario(scenario) if isinstance(scenario, str) else scenario
     sim_cfg = options.sim_config or DriveSetup.of(scenario, person=True).sim  # a person may stand still as long as they like
     if not 0.0 < options.v_mps <= sim_cfg.vehicle.max_speed_mps:
-        raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {options.v_mps:g}", field="v_mps")
+        raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {options.v_mps:g}", field="--speed")
     if options.max_frames is not None and options.max_frames < 0:
         raise UserError(SOURCE, "max_frames must be >= 0", field="max_frames")
     camera, preference, planner, profile = options.camera, options.preference, None, options.profile
