@@ -170,3 +170,27 @@ def test_with_a_heading_tolerance_the_vehicle_turns_in_place_at_the_goal():
 def test_the_goal_settings_are_checked(settings):
     with pytest.raises(ValueError):
         StopConfig(**settings)
+
+
+@pytest.mark.parametrize(
+    "pose, stop",
+    [
+        ((10.1, 8.0, 0.0), None),  # past the end's line, 8 m beside it: not at its goal
+        ((10.1, 0.6, 0.0), None),  # just past the tolerance beside it
+        ((10.1, 0.4, 0.0), "goal"),  # within it
+        ((15.0, 0.0, 0.0), "goal"),  # 5 m past the end, on the path's line: nothing left to drive
+    ],
+)
+def test_a_vehicle_past_the_end_is_at_its_goal_only_near_the_path_s_line(pose, stop):
+    path = ReferencePath(np.array([[0.0, 0.0], [10.0, 0.0]]))
+    assert _state(GoalCheck(StopConfig(), 1.0), pose, path).stop == stop
+
+
+def test_a_vehicle_that_passes_the_end_beside_it_comes_back_to_its_goal(fast_model, open_ground):
+    """Past the path's end 2 m beside it, the planner turns back to the end's line and says `goal`
+    there, where it used to say `goal` where it stood."""
+    poses, _, reasons, _ = _drive(fast_model, open_ground, (30.5, 22.0, 0.0), waypoints=[[20.0, 20.0], [30.0, 20.0]], frames=120)
+    assert reasons[0] is None  # it did not claim its goal 2 m beside it
+    first = reasons.index("goal")
+    assert abs(poses[first, 1] - 20.0) <= 0.5 + 0.1 and poses[first, 0] > 29.5  # on the end's line (a frame's travel), at or past the end
+    assert all(r == "goal" for r in reasons[first:])

@@ -5,7 +5,9 @@ rule steers, the way a goal checker sits beside Nav2's controllers rather than i
 
 - ``goal``: the vehicle is within ``goal_tolerance_m`` of the path's last point with no more
   than that left of the path to drive, or has passed the last point (its progress is at the end
-  of the path and it stands beyond the line through the last point square to the last segment). It commands v = 0 with the reason ``goal`` from then on, until it
+  of the path and it stands beyond the line through the last point square to the last segment,
+  within ``goal_tolerance_m`` of the last segment's line: a vehicle that went round something at
+  the end is not at its goal metres beside it). It commands v = 0 with the reason ``goal`` from then on, until it
   is given a new path. With ``goal_yaw_tolerance_deg`` it first turns in place there until its
   heading is within that of the last segment's direction.
 - the approach: near the last point the speed is capped at sqrt(2 a d), d the distance to it
@@ -88,7 +90,8 @@ class GoalCheck:
         if not abs(lateral_m) <= c.off_path_m:  # NaN or inf (a pose too far off to compute) is off the path too
             return PathState(OFF_PATH, 0.0, None, 0.0, to_goal)
         left_m = path.length_m - progress_m  # the path still to drive (a path that ends where it starts is not done at its start)
-        passed = left_m <= 1e-9 and (x - ex) * ux + (y - ey) * uy >= 0.0
+        beside = abs((y - ey) * ux - (x - ex) * uy)  # from the last segment's line, past its end
+        passed = left_m <= 1e-9 and (x - ex) * ux + (y - ey) * uy >= 0.0 and beside <= c.goal_tolerance_m
         if (to_goal <= c.goal_tolerance_m and left_m <= c.goal_tolerance_m) or passed:
             turn = self._turn_at_goal(yaw, math.atan2(uy, ux))
             if turn is not None:

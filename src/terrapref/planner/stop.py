@@ -92,7 +92,8 @@ class StopConfig:
             would otherwise hold it for ever, as no later frame can see that ground again. Where
             the camera looks, every lethal cell blocks (the next frames confirm or clear it).
         goal_tolerance_m: the goal is reached within this distance of the path's last point (or
-            once the vehicle has passed that point) [m] (terrapref.planner.goal).
+            once the vehicle has passed that point within this of the path's last segment's
+            line) [m] (terrapref.planner.goal).
         goal_yaw_tolerance_deg: with a value, the goal also needs the heading within this many
             degrees of the path's last direction: the vehicle turns in place there until it is;
             None: the heading is not checked.
