@@ -313,6 +313,37 @@ def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup
         assert raised.value.problems[0].field == field
 
 
+def test_the_robots_tilt_and_step_limits_come_from_its_file_then_its_parameters(tmp_path):
+    """On relief the robot file's limits say what the robot crosses (they could not: the nodes
+    always held the default vehicle's 25 deg, 30 deg and 0.15 m), and its node's parameters over them."""
+    from terrapref.errors import ConfigError
+    from terrapref.groundmap.height import GeometryLimits
+    from terrapref.interop.node_core import NodeOptions
+
+    text = (
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+        "limits: {max_roll_deg: 15.0, max_pitch_deg: 20.0, max_step_m: 0.08}\n"
+    )
+    (tmp_path / "robot.yaml").write_text(text)
+    robot = load_robot(tmp_path / "robot.yaml")
+    limits = GeometryLimits.of(robot.limits)
+    assert (round(math.degrees(limits.max_slope_rad), 9), limits.max_step_m) == (15.0, 0.08)  # the smaller of roll and pitch
+    params = {"~max_step_m": 0.3, "~max_roll_deg": 22.0}
+    applied = NodeOptions().resolved(lambda name, default: params.get(name, default)).applied_to(robot)
+    assert (applied.limits.max_roll_deg, applied.limits.max_pitch_deg, applied.limits.max_step_m) == (22.0, 20.0, 0.3)
+    for bad, field in (
+        ("limits: {max_roll_deg: 90}", "limits.max_roll_deg"),
+        ("limits: {max_pitch_deg: .nan}", "limits.max_pitch_deg"),
+        ("limits: {max_step_m: 0.001}", "limits.max_step_m"),
+        ("limits: {max_step_m: tall}", "limits.max_step_m"),
+    ):
+        (tmp_path / "bad.yaml").write_text(text.replace("limits: {max_roll_deg: 15.0, max_pitch_deg: 20.0, max_step_m: 0.08}", bad))
+        with pytest.raises(ConfigError) as raised:
+            load_robot(tmp_path / "bad.yaml")
+        assert raised.value.problems[0].field == field
+
+
 def test_the_node_holds_a_fast_model_to_the_robots_limits_and_says_it_arrived(setup, tmp_path):
     """A model asking for 8 m/s on a robot of 1.2 m/s: 1.2 m/s at most, said; along a 0.3 m path the
     node stands at its goal at once and says it arrived; a new path, and it has not."""

@@ -534,7 +534,8 @@ class NodeOptions:
         hold_s: how long a decision's command holds after its frame's stamp [s] (default 0.3).
         watchdog_s: a stop once no frame has been decided on for this long by the wall clock [s]
             (default 1).
-        max_speed_mps, max_yaw_rate_rps, max_accel_mps2: the robot's limits (robot file ``limits``).
+        max_speed_mps, max_yaw_rate_rps, max_accel_mps2, max_roll_deg, max_pitch_deg, max_step_m:
+            the robot's limits (robot file ``limits``).
         goal_tolerance_m, goal_yaw_tolerance_deg, off_path_m: the goal check's settings (robot file ``stop``).
         rules: the robot's settings of the model's rules, given over the robot file's ``rules``
             (ROS 2: ``-p offset.switch_margin:=0.3``; ROS 1: ``~offset/switch_margin``;
@@ -552,6 +553,9 @@ class NodeOptions:
     max_speed_mps: float | None = None
     max_yaw_rate_rps: float | None = None
     max_accel_mps2: float | None = None
+    max_roll_deg: float | None = None
+    max_pitch_deg: float | None = None
+    max_step_m: float | None = None
     goal_tolerance_m: float | None = None
     goal_yaw_tolerance_deg: float | None = None
     off_path_m: float | None = None

@@ -36,6 +36,9 @@
       max_speed_mps: 2.0                       # top speed [m/s]
       max_yaw_rate_rps: 1.0                    # [rad/s]
       max_accel_mps2: 1.0                      # the speed given out rises no faster [m/s^2]; null: the base ramps it
+      max_roll_deg: 25.0                       # on relief: ground that would roll it further is lethal [deg]
+      max_pitch_deg: 30.0                      # ... that would pitch it further [deg]
+      max_step_m: 0.15                         # ... a step higher than it climbs [m]
     rules:                                     # optional: the robot's settings of the model's rules (terrapref.rules.settings)
       offset: {switch_margin: 0.3}             # RULE: {NAME: value}; docs/robot.md lists them
       speed: {max_speed_mps: 1.5, class_max_mps: {mud: 0.5}}
@@ -80,7 +83,9 @@ _TOPIC_NAME = re.compile(r"^(?:/[A-Za-z_][A-Za-z0-9_]*)+$")  # a global ROS name
 # namespace, or private (``~/x`` in ROS 2, ``~x`` in ROS 1).
 GIVEN_TOPIC_NAME = re.compile(r"^(?:~/?|/)?[A-Za-z_][A-Za-z0-9_]*(?:/[A-Za-z_][A-Za-z0-9_]*)*$")
 _TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop", "limits", "rules"}
-LIMITS = ("max_speed_mps", "max_yaw_rate_rps", "max_accel_mps2")  # the robot's limits a file (or a node's parameters) may set
+# The robot's limits a file (or a node's parameters) may set: what it may be commanded, and on
+# relief what it crosses (ground past them is lethal: terrapref.groundmap.height.GeometryLimits).
+LIMITS = ("max_speed_mps", "max_yaw_rate_rps", "max_accel_mps2", "max_roll_deg", "max_pitch_deg", "max_step_m")
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry")
 _TOPICS_OPTIONAL = ("command", "path", "depth", "depth_info")
 _TOPICS = set(_TOPICS_REQUIRED) | set(_TOPICS_OPTIONAL)
@@ -208,6 +213,9 @@ LIMIT_RANGES = {  # the least and the most a robot file or a node's parameter ma
     "max_speed_mps": (MIN_CRUISE_MPS, 30.0),
     "max_yaw_rate_rps": (0.05, 10.0),
     "max_accel_mps2": (0.05, 50.0),
+    "max_roll_deg": (1.0, 89.0),
+    "max_pitch_deg": (1.0, 89.0),
+    "max_step_m": (0.01, 2.0),
 }
 
 

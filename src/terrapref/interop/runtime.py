@@ -110,7 +110,9 @@ class RobotSettings:
     Attributes:
         stop: when the planner stops, its goal check included (terrapref.planner.stop.StopConfig).
         limits: the robot's limits (top speed, yaw rate, acceleration), which bound every command
-            whatever the model asks for (default: the default vehicle's: 2 m/s, 1 rad/s, 1 m/s^2).
+            whatever the model asks for, and on relief its tilt and step limits, past which
+            ground is lethal (default: the default vehicle's: 2 m/s, 1 rad/s, 1 m/s^2; 25 deg of
+            roll, 30 of pitch, a step of 0.15 m).
         hold_s: how long a decision's command stays in force after its frame's stamp [s].
         ahead_s: how far a frame's stamp may be ahead of the caller's clock [s]: clock skew, or a
             simulated clock whose messages come late (default :data:`FRAME_AHEAD_S`).
