@@ -374,6 +374,23 @@ def test_the_node_holds_a_fast_model_to_the_robots_limits_and_says_it_arrived(se
     assert not near.arrived
 
 
+def test_a_node_says_at_its_start_that_a_model_taught_relief_gets_no_depth(setup, tmp_path):
+    """A model whose speed rule learned grades, on a robot whose file names no depth topic: the
+    node's start says the ground is taken as flat (it said nothing, and drove into a ledge)."""
+    from test_interop import speed_block
+
+    model, robot, _, _ = setup
+    relief = {**speed_block(1.0), "up_mps_per_deg": 0.05, "down_mps_per_deg": 0.02}
+    meta = {**model.meta, "rules": [*model.meta["rules"], relief]}
+    taught = load_model(save_model(tmp_path / "relief.safetensors", model.classifier, model.weights, meta))
+    assert "depth" not in robot.topics
+    for m, said in ((taught, True), (model, False)):
+        core = PlannerNodeCore(m, robot, np.array([[20.0, 15.0], [60.0, 15.0]]))
+        core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+        notes = [n for n in core.runtime.notes if "taught relief" in n]
+        assert bool(notes) == said and all(f"{robot.source} names no topics.depth" in n for n in notes)
+
+
 def test_the_rules_settings_come_from_the_robot_file_then_the_nodes_parameters(setup, tmp_path):
     """The robot file's ``rules`` block, then a node's parameters over it (ROS 2's flat
     ``offset.switch_margin``, ROS 1's nested ``~offset``), are what the node's planner decides

@@ -226,5 +226,84 @@ def test_a_depth_image_places_the_ground_and_one_that_does_not_fit_the_camera_is
     assert returns.sum() > 1000 and np.nanmax(np.abs(elevation[returns > 0])) < 1e-3
     with pytest.raises(ValueError, match="depth image of shape"):
         seen.decide(ids, 1.1, pose, depth=DepthFrame(depth[:-1]))
-    with pytest.raises(ValueError, match="attitude must be finite"):
+    with pytest.raises(ValueError, match="attitude must be the body's"):
         seen.decide(ids, 1.2, pose, depth=DepthFrame(depth, (0.0, float("nan"), 0.0)))
+
+
+def _relief_frame(pose=(5.0, 12.0, 0.0)):
+    """A frame of flat ground and its depth image, on a path along y = 12 m."""
+    from terrapref.camera import PinholeCamera, SegmentationRenderer
+    from terrapref.scenario import resolve_scenario
+    from terrapref.world import rasterise
+
+    return SegmentationRenderer(PinholeCamera(), rasterise(resolve_scenario("demo_course"))).render_with_depth(pose)
+
+
+@pytest.mark.parametrize(
+    "attitude",
+    [(0.0, 0.1), (0.0, 0.1, 0.0, 1.0), np.zeros((1, 3)), {"z_m": 0.0}, "level", (0.0, 2.0, 0.0), (0.0, 0.0, 1e6)],
+)
+def test_an_attitude_that_is_not_one_is_refused_naming_it(cruising, attitude):
+    """Two numbers, four, an array of another shape, a mapping, a pitch past the vertical: each a
+    ValueError naming the attitude and its form, where they were TypeErrors or drove on."""
+    ids, depth = _relief_frame()
+    runtime = _runtime(cruising)
+    runtime.set_path(PATH + [0.0, 12.0])
+    with pytest.raises(ValueError, match=r"attitude must be the body's \(z_m, pitch_rad, roll_rad\)"):
+        runtime.decide(ids, 1.0, (5.0, 12.0, 0.0), depth=DepthFrame(depth, attitude))
+
+
+def test_a_depth_image_checked_as_a_robot_s_come(cruising):
+    """None is a level attitude; millimetres are refused as the nodes refuse them; a depth image
+    stamped 0.4 s from its label image (a depth camera that froze) is refused and counted; after
+    frames with depth, a frame without is refused, so that the command goes stale."""
+    ids, depth = _relief_frame()
+    runtime = _runtime(cruising)
+    runtime.set_path(PATH + [0.0, 12.0])
+    pose = (5.0, 12.0, 0.0)
+    with pytest.raises(ValueError, match="millimetres as it seems"):
+        runtime.decide(ids, 1.0, pose, depth=DepthFrame(depth * 1000.0))
+    assert runtime.decide(ids, 1.0, pose, depth=DepthFrame(depth, None, 1.03)).stop is None  # level; 30 ms apart
+    with pytest.raises(ValueError, match="stamped -0.4 s from its label image"):
+        runtime.decide(ids, 1.1, pose, depth=DepthFrame(depth, None, 0.7))
+    with pytest.raises(ValueError, match="without its depth image, after frames with one"):
+        runtime.decide(ids, 1.2, pose)
+    assert runtime.refused["with a depth image stamped more than 50 ms from it"] == 1
+    assert runtime.refused["without a depth image, after frames with one"] == 1
+    assert runtime.status_at(1.0 + runtime.hold_s + 0.1) == ((0.0, 0.0), "stale")
+    assert not runtime.notes  # a model of flat ground: nothing to say of frames without depth
+
+
+@pytest.mark.parametrize("dead", [np.nan, 0.0, np.inf])
+def test_a_depth_camera_that_sees_nothing_is_blind(cruising, dead):
+    """A depth image without a return (a covered or dead depth camera) stopped the planner for
+    ever as `no_free_way`: it is `blind`, as a covered lens is."""
+    ids, depth = _relief_frame()
+    runtime = _runtime(cruising)
+    runtime.set_path(PATH + [0.0, 12.0])
+    reasons = [runtime.decide(ids, 1.0 + 0.1 * i, (5.0, 12.0, 0.0), depth=DepthFrame(np.full_like(depth, dead))).stop for i in range(8)]
+    assert reasons[-1] == "blind"
+
+
+def test_a_model_taught_relief_without_depth_images_is_said(cruising, tmp_path):
+    """A model whose speed rule learned grades, given frames without depth: said once in the
+    notes (it drove on without a word); and a node whose robot file names no depth topic says it
+    at its start."""
+    from terrapref.learning.model_file import load_model
+    from terrapref.planner.model import Model
+
+    loaded = load_model(cruising)
+    meta = {
+        **loaded.meta,
+        "rules": [{**r, "up_mps_per_deg": 0.05, "down_mps_per_deg": 0.02} if r["type"] == "speed" else r for r in loaded.meta["rules"]],
+    }
+    relief = save_model(tmp_path / "relief.safetensors", ClassifierConfig(hidden=8, skip=True), loaded.weights, meta)
+    assert Model.load(relief).reads_relief and not Model.load(cruising).reads_relief
+    runtime = _runtime(relief)
+    assert not runtime.notes
+    for i in range(2):
+        runtime.decide(GRASS, 1.0 + 0.1 * i, (5.0, 0.0, 0.0))
+    assert [n for n in runtime.notes if "taught relief" in n] == [
+        "the model was taught relief (slopes, steps, rough ground) but its frames come without depth images: "
+        "the ground is taken as flat, and no ground is blocked by its geometry"
+    ]

@@ -1083,3 +1083,20 @@ def test_a_set_speed_past_the_vehicles_is_refused_naming_the_flag(tmp_path, caps
         assert main(["drive", "demo_course", "--speed", speed, "--record", str(tmp_path / "rec")]) == 2
         one_line_error(capsys, "--speed", "(0, 2] m/s")
     assert not (tmp_path / "rec").exists()
+
+
+def test_riding_along_on_relief_the_planner_reads_the_depth_and_stops_short_of_the_ledge(tmp_path):
+    """Riding along, the planner was given the frames without their depth images: on
+    `relief_hazards` it drove into the 0.4 m ledge and stood stuck against it, commanding its
+    cruising speed, where evaluate's runs of the same model go round it."""
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+    from helpers import skip_path_weights
+    from terrapref.learning.model_file import save_model
+    from terrapref.learning.network import ClassifierConfig
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    result = run_teleop("relief_hazards", None, realtime=False, wait_for_start=False, max_frames=450, model=model, script=lambda _: [])
+    assert result.planner_frames == 450 and result.max_pitch_deg > 10.0  # it drove the course's relief
+    assert (result.stuck, result.tips, result.collisions) == (0, 0, 0)

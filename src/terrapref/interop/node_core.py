@@ -47,7 +47,15 @@ from terrapref.interop.ros_decode import (
     unit_quaternion,
     yaw_rad,
 )
-from terrapref.interop.runtime import SPEED_WINDOW_S, DepthFrame, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
+from terrapref.interop.runtime import (
+    FLAT_NOTE,
+    SPEED_WINDOW_S,
+    DepthFrame,
+    PlannerRuntime,
+    RobotSettings,
+    RuntimeDecision,
+    odometry_speed_mps,
+)
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
@@ -202,6 +210,8 @@ class PlannerNodeCore:
             self._info = info
             # fed class ids, mapped and undistorted here
             runtime = PlannerRuntime(self.model, camera, robot=self.settings)
+            if runtime.model.reads_relief and "depth" not in self.robot.topics:  # said at the start, where the node logs its notes
+                runtime.notes.append(f"{FLAT_NOTE} ({self.robot.source} names no topics.depth)")
             labels = self.robot.labels
             # An id the label map does not list becomes one the class table does not name, and is refused with it.
             self._lut = labels.lut(self.model.classes, UNKNOWN if labels.unlisted == "unknown" else runtime.foreign.unnamed)

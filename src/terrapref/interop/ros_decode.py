@@ -337,6 +337,16 @@ DEPTH_CHECK_STRIDE = 61  # every this many pixels of a depth image are sampled f
 DEPTH_ENCODINGS = ("32FC1", "16UC1")  # REP 118: metres as float32; millimetres as uint16, 0 where nothing is seen
 
 
+def millimetres_median(metres: np.ndarray) -> float | None:
+    """The median [m] of a float depth image's returns (finite and above 0, sampled every
+    :data:`DEPTH_CHECK_STRIDE` pixels) where it lies past :data:`MILLIMETRES_LIKE_M`: the image
+    holds millimetres, not metres; None where it does not."""
+    sample = np.asarray(metres).reshape(-1)[::DEPTH_CHECK_STRIDE]  # a prime stride: no row's pattern
+    seen = sample[np.isfinite(sample) & (sample > 0)]
+    median = float(np.median(seen)) if len(seen) else 0.0
+    return median if median > MILLIMETRES_LIKE_M else None
+
+
 def depth_metres(msg, topic: str, source: str, t_s: float | None = None) -> np.ndarray:
     """The depth image (H, W) float32 [m along the optical axis, NaN where nothing is seen] of a
     sensor_msgs/Image on ``topic``: 32FC1 metres (not finite or not above 0: nothing seen) or
@@ -364,10 +374,8 @@ def depth_metres(msg, topic: str, source: str, t_s: float | None = None) -> np.n
     if encoding == "16UC1":
         return millimetres_to_depth(values)
     metres = values.astype(np.float32)
-    sample = metres.reshape(-1)[::DEPTH_CHECK_STRIDE]  # a sample of the returns for a check (a prime stride: no row's pattern)
-    seen = sample[np.isfinite(sample) & (sample > 0)]
-    median = float(np.median(seen)) if len(seen) else 0.0
-    if median > MILLIMETRES_LIKE_M:
+    median = millimetres_median(metres)
+    if median is not None:
         raise UserError(
             source,
             f"{where}: depth of a median {median:g} m, millimetres as it seems; 32FC1 is metres (REP 118), millimetres come as 16UC1",

@@ -23,7 +23,9 @@ On uneven ground each label image may come with its depth image (:class:`DepthFr
 metres along the optical axis, of the label camera's size and intrinsics, and the body's
 attitude when it was taken): the planner's ground maps then place what the image shows where
 the depth returns lie, gather the ground's heights, and block ground past the robot's limits
-(terrapref.groundmap.height). Without one, the ground is taken as flat.
+(terrapref.groundmap.height). Without one, the ground is taken as flat: a model taught on relief
+is noted (:attr:`PlannerRuntime.notes`), and once frames have come with depth images a frame
+without one is refused, so that a depth camera that stops stops the robot (``stale``).
 """
 
 from __future__ import annotations
@@ -36,9 +38,11 @@ from typing import NamedTuple
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.errors import finite_number
+from terrapref.errors import described, finite_number
 from terrapref.groundmap.costmap import Costmap
+from terrapref.interop.depth_pairing import DEPTH_PAIRING_S
 from terrapref.interop.labels import LabelMap, unlisted_message
+from terrapref.interop.ros_decode import millimetres_median
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
@@ -61,6 +65,13 @@ def fastest_plausible_mps(top_mps: float) -> float:
 
 FRAME_AHEAD_S = 1.0  # by default, a frame (or a decision) stamped further ahead of the caller's clock is refused [s]
 UNKNOWN_IDS = ("error", "unknown")  # what the runtime makes of an id no table or map names (PlannerRuntime's unknown_ids)
+NO_DEPTH = "without a depth image, after frames with one"  # why a frame is refused (PlannerRuntime.refused)
+DEPTH_APART = f"with a depth image stamped more than {1000 * DEPTH_PAIRING_S:.0f} ms from it"
+# Said of a model taught on relief whose frames come without depth images.
+FLAT_NOTE = (
+    "the model was taught relief (slopes, steps, rough ground) but its frames come without depth images: "
+    "the ground is taken as flat, and no ground is blocked by its geometry"
+)
 
 
 class DepthFrame(NamedTuple):
@@ -70,11 +81,16 @@ class DepthFrame(NamedTuple):
         image: (H, W) float [m along the optical axis, NaN where nothing is seen; REP 118],
             registered to the label image (its camera's size and intrinsics).
         attitude: the body's height [m], pitch and roll [rad] (REP 103: pitch positive nose
-            down, roll positive left side up); level where the robot does not know it.
+            down, roll positive left side up; each within +-pi/2); level (or None) where the
+            robot does not know it.
+        stamp_s: when the depth image was taken [s]: one more than
+            :data:`~terrapref.interop.depth_pairing.DEPTH_PAIRING_S` from its label image's stamp
+            is refused (a depth camera that froze); None: taken with the label image.
     """
 
     image: np.ndarray
-    attitude: Attitude = LEVEL
+    attitude: Attitude | None = LEVEL
+    stamp_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -172,7 +188,8 @@ class PlannerRuntime:
         # Refuses a camera the model was not trained for, and a rule setting a rule cannot take.
         self.planner = self.model.planner(camera, stop=robot.stop, vehicle=robot.limits, settings=robot.rules)
         self.notes = limit_notes(self.model, self.limits) + settings_notes(self.model, robot.rules)
-        self.refused = {"stamped ahead of the clock": 0, "decisions the clock found in its future": 0}
+        self.refused = {"stamped ahead of the clock": 0, "decisions the clock found in its future": 0, NO_DEPTH: 0, DEPTH_APART: 0}
+        self._with_depth = False  # whether a frame came with a depth image: later ones must too
         self._sent: tuple[float, float] | None = None  # (time [s], v [m/s]) of the last command given out (or the first frame's speed)
         self.planner.warm_up()  # the compiled loops ready before the first frame
         self.shape = self.planner.camera.shape
@@ -215,8 +232,10 @@ class PlannerRuntime:
         Raises:
             ValueError: a frame stamped more than ``ahead_s`` ahead of ``now_s`` (its
                 clock and the caller's disagree: kept, it would make every later frame look old),
-                counted in :attr:`refused`; or a frame the runtime cannot read (size, type, ids,
-                a depth image of another size or not of floats, an attitude not finite); a
+                a frame without a depth image after frames with one, or with one stamped apart
+                from it (:class:`DepthFrame`), each counted in :attr:`refused`; or a frame the
+                runtime cannot read (size, type, ids, a depth image of another size, not of
+                floats or in millimetres, an attitude that is not one); a
                 clock not finite; a speed past :data:`ODOMETRY_SLACK` times the robot's top
                 speed (and 0.5 m/s), which the commands would rise from at once.
         """
@@ -225,12 +244,12 @@ class PlannerRuntime:
         image = self._ids(np.asarray(image))
         if depth is not None and not isinstance(depth, DepthFrame):
             raise ValueError(f"depth must be a DepthFrame (its image and the body's attitude), got {type(depth).__name__}")
-        depth_image, attitude = self._depth(depth)
         if len(pose) != 3 or not all(_finite(v) for v in pose):
             raise ValueError(f"pose must be 3 finite numbers (x [m], y [m], yaw [rad]), got {pose!r}")
         pose = Pose(*(float(v) for v in pose))
         if not _finite(stamp_s):
             raise ValueError(f"stamp_s must be a finite number of seconds, got {stamp_s!r}")
+        depth_image, attitude = self._depth(depth, float(stamp_s))
         if speed_mps is not None and not _finite(speed_mps):
             raise ValueError(f"speed must be finite, got {speed_mps!r}")
         top = self.limits.max_speed_mps
@@ -270,19 +289,39 @@ class PlannerRuntime:
             raise ValueError(f"label image of dtype {image.dtype}; expected uint8 class ids (or give a label map)")
         return self._named(image)
 
-    def _depth(self, depth: DepthFrame | None) -> tuple[np.ndarray | None, Attitude]:
-        """``depth``'s image as float32 and its attitude, checked against the camera (a ValueError
-        says what is wrong); (None, level) without one."""
+    def _depth(self, depth: DepthFrame | None, stamp_s: float) -> tuple[np.ndarray | None, Attitude]:
+        """``depth``'s image as float32 and its attitude, checked against the camera and the
+        label image's ``stamp_s`` (a ValueError says what is wrong; refused frames are counted);
+        (None, level) without one, which frames with depth before it refuse."""
         if depth is None:
+            if self._with_depth:
+                self.refused[NO_DEPTH] += 1
+                raise ValueError(
+                    "a frame without its depth image, after frames with one: refused (a depth camera that stopped), "
+                    "so the command in force goes stale; give each label image its DepthFrame"
+                )
+            if self.model.reads_relief and not any(note.startswith(FLAT_NOTE) for note in self.notes):
+                self.notes.append(FLAT_NOTE)
             return None, LEVEL
         image = np.asarray(depth.image)
         if image.shape != self.shape or image.dtype.kind != "f":
             raise ValueError(
                 f"depth image of shape {image.shape} and dtype {image.dtype}; expected floats [m] of the label image's shape {self.shape}"
             )
-        attitude = Attitude(*(float(a) for a in depth.attitude))
-        if not all(math.isfinite(a) for a in attitude):
-            raise ValueError(f"attitude must be finite, got {tuple(attitude)}")
+        median = millimetres_median(image)
+        if median is not None:
+            raise ValueError(f"depth image of a median {median:g} m: millimetres as it seems; DepthFrame takes metres (REP 118)")
+        attitude = _attitude(depth.attitude)
+        if depth.stamp_s is not None:
+            if not _finite(depth.stamp_s):
+                raise ValueError(f"the depth image's stamp_s must be a finite number of seconds, got {depth.stamp_s!r}")
+            if abs(float(depth.stamp_s) - stamp_s) > DEPTH_PAIRING_S + 1e-9:
+                self.refused[DEPTH_APART] += 1
+                raise ValueError(
+                    f"a depth image stamped {float(depth.stamp_s) - stamp_s:+.3g} s from its label image; refused "
+                    f"(more than {1000 * DEPTH_PAIRING_S:.0f} ms: a depth camera that froze, or another frame's)"
+                )
+        self._with_depth = True
         return image.astype(np.float32, copy=False), attitude
 
     def _named(self, image: np.ndarray) -> np.ndarray:
@@ -351,6 +390,24 @@ class PlannerRuntime:
 def _finite(value: object) -> bool:
     """:func:`terrapref.errors.finite_number`, NumPy's scalars taken as the Python numbers they hold."""
     return finite_number(value.item() if isinstance(value, np.generic) else value)
+
+
+def _attitude(given: object) -> Attitude:
+    """The body's attitude a :class:`DepthFrame` gives (None: level), as an :class:`Attitude`; a
+    ValueError naming it where it is not three finite numbers, pitch and roll within +-pi/2."""
+    if given is None:
+        return LEVEL
+    try:
+        values = tuple(float(v) for v in given) if not isinstance(given, (str, bytes, dict)) else ()
+    except (TypeError, ValueError):
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values) or max(abs(values[1]), abs(values[2])) > math.pi / 2:
+        shown = repr(given) if isinstance(given, tuple) else described(given)
+        raise ValueError(
+            "a DepthFrame's attitude must be the body's (z_m, pitch_rad, roll_rad): 3 finite numbers, pitch and roll "
+            f"within +-pi/2 (None: level); got {shown}"
+        )
+    return Attitude(*values)
 
 
 def _check_clock(now_s: float | None) -> None:

@@ -99,6 +99,11 @@ class Model:
         return tuple(self.policy.profile or ())
 
     @property
+    def reads_relief(self) -> bool:
+        """Whether a rule of the model was taught the ground's relief (it needs depth images to read it)."""
+        return any(rule.reads_relief for rule in self.rules)
+
+    @property
     def top_speed_mps(self) -> float | None:
         """The fastest its speed rule commands [m/s]; None without one (the control set's speed)."""
         speed = speed_rule(self.policy.rules)

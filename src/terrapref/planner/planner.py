@@ -212,6 +212,12 @@ class Planner:
             self.speed.reset()
         self.forget_ground()
 
+    def decide_frame(self, frame: Frame) -> Decision:
+        """:meth:`decide` on a simulated robot's frame (as it reached the robot): its view, pose,
+        time and odometry speed, and on relief its depth image and the body's attitude."""
+        depth = frame.view.depth if frame.view.carries_depth else None
+        return self.decide(frame.view, frame.pose, frame.time_s, frame.speed_mps, depth, frame.attitude)
+
     def decide(
         self,
         image: np.ndarray | SegmentationView,
@@ -234,7 +240,8 @@ class Planner:
         """
         if self.path is None or self.tracker is None:
             raise RuntimeError("call set_path() first")
-        view = as_view(image)
+        # An image in hand carries its depth image with it: the stop rule reads where it has returns.
+        view = as_view(image) if depth is None or isinstance(image, SegmentationView) else SegmentationView.of(image, depth, attitude)
         s = self.tracker.update(np.array(pose[:2]))
         state = self.goal.check(pose, self.path, s, self.tracker.lateral_m)
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
@@ -410,8 +417,7 @@ class PlannerDriver:
         return self.planner.stop_rule.stale(now_s, frame_s, hold_s)
 
     def act(self, frame: Frame) -> Command:
-        depth = frame.view.depth if frame.view.carries_depth else None
-        d = self.last = self.planner.decide(frame.view, frame.pose, frame.time_s, frame.speed_mps, depth, frame.attitude)
+        d = self.last = self.planner.decide_frame(frame)
         if self.keep:
             d.probs  # noqa: B018 (computed now, so that the kept decisions do not hold their frames)
             self.decisions.append(d)

@@ -17,8 +17,9 @@ its command, the planner commands v = 0 instead when:
   look, the rule goes by what the map remembers from earlier frames, and a vehicle that starts
   on ground it has never seen takes that ground as the ground it stands on.
 - ``blind``: for ``blind_after_s`` or longer, each frame showed less than ``seen_share`` of the
-  ground ahead (the footprint's width, from the camera's near edge to ``look_m``): a lens
-  covered, a segmentation that failed, a range cut short.
+  ground ahead (the footprint's width, from the camera's near edge to ``look_m``; with a depth
+  image, ground with a return): a lens covered, a segmentation that failed, a range cut short, a
+  depth camera that sees nothing.
 - ``stale``: no fresh frame for longer than the command is held (the runtime's and the
   simulated robot's ``hold_s``), or, on a robot's node, no frame decided on for the watchdog's
   limit by the wall clock: they give the rule the time and the last frame's (:meth:`StopRule.stale`),
@@ -243,11 +244,16 @@ class StopRule(StopRunner):
         self._frames = 0
 
     def seen_share(self, view: SegmentationView) -> float:
-        """The share of the ground ahead (the footprint's width, near edge to ``look_m``) that ``view`` shows as ground."""
+        """The share of the ground ahead (the footprint's width, near edge to ``look_m``) that ``view``
+        shows as ground: with a depth image, where it has a return too (a pixel without one cannot
+        be placed on the ground: a depth camera that sees nothing is blind)."""
         if self._ahead.shape[0] == 0:
             return 0.0
-        ids = view.pixels(self._ahead)
-        return float(np.count_nonzero(ids != UNKNOWN)) / ids.shape[0]
+        seen = view.pixels(self._ahead) != UNKNOWN
+        if view.carries_depth:
+            depth = view.depth.reshape(-1)[self._ahead.flat]
+            seen &= (depth > 0) & (depth < np.inf)  # NaN, 0 or inf: no return
+        return float(np.count_nonzero(seen)) / seen.shape[0]
 
     def check(
         self, gmap: GroundMap, view: SegmentationView, pose: Pose, v_mps: float, w_rps: float, time_s: float | None = None

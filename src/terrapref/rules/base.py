@@ -262,6 +262,12 @@ class Rule(abc.ABC):
         rule cannot take is a ValueError saying why."""
         raise ValueError(f"the {self.type} rule takes no settings")
 
+    @property
+    def reads_relief(self) -> bool:
+        """Whether the rule was taught the ground's relief (it reads the height layer a depth image
+        gives: without one it drives the ground as flat)."""
+        return False
+
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         """One line on what was fitted (``terrapref train``, ``terrapref info``); ``names`` the terrain columns' classes."""
         return self.type

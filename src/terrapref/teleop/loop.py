@@ -311,7 +311,7 @@ class _Session:
         if self.planner is None:
             return None
         got = self.recorder.perceive(self.frame)
-        return self.planner.decide(got.view, got.pose, got.time_s, got.speed_mps) if got is not None else self.decision
+        return self.planner.decide_frame(got) if got is not None else self.decision  # on relief with its depth, as evaluate's
 
     # --- input --------------------------------------------------------------------------------
 

@@ -246,6 +246,11 @@ class OffsetRule(Rule):
     utility: OffsetUtility
     fit: OffsetFit | None = None
 
+    @property
+    def reads_relief(self) -> bool:
+        """Whether its utility prices relief (a drive on relief taught it)."""
+        return self.utility.relief is not None
+
     def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> OffsetRule:
         """The rule holding offsets as ``values`` say (its fitted utility unchanged)."""
         return replace(self, config=replace(self.config, **{k: float(v) for k, v in values.items()}))

@@ -268,6 +268,11 @@ class SpeedRule(Rule):
             return "expected a top speed > 0 [m/s]" if not value > 0 else None
         return f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed" if value < MIN_SPEED_MPS else None
 
+    @property
+    def reads_relief(self) -> bool:
+        """Whether it learned speeds on grades or rough ground."""
+        return self.model.sheds_on_grades or self.model.slows_on_rough
+
     def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> SpeedRule:
         """The rule no faster than ``values`` say: overall (``max_speed_mps``) and on each class
         named (``class_max_mps``: the cruising speed learned there, capped). A class it keeps no
