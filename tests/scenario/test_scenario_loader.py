@@ -1008,8 +1008,9 @@ def test_generated_courses_are_deterministic_valid_and_labelled_by_kind() -> Non
         assert {z.expect for z in course.zones} == ({AVOID} if kinds == ("lone",) else {BEST})
     mixed = {zone_kind(z.label) for s in range(1000, 1004) for z in resolve_scenario(f"gen:{s}").zones}
     assert mixed == set(ZONE_KINDS)
-    with pytest.raises(ScenarioError, match="gen:SEED"):
-        resolve_scenario("gen:abc")
+    for name in ("gen:abc", "gen: 3", "gen:3_0", "genrelief:3_0", "genrelief:+3", "gen:٣"):  # int() read the last five as seeds
+        with pytest.raises(ScenarioError, match="SEED with an integer SEED"):
+            resolve_scenario(name)
 
 
 @pytest.mark.parametrize("data", [[1, 2], "x", None, 3])

@@ -43,10 +43,10 @@ def _generated(name: str, prefix: str, classes: ClassTable | None) -> Scenario:
     """The generated course ``name`` (``gen:SEED`` or ``genrelief:SEED``)."""
     from terrapref.scenario.generate import generate_course
 
-    try:
-        seed = int(name[len(prefix) :])
-    except ValueError:
-        raise ScenarioError(name, f"a generated course is named {prefix}SEED with an integer SEED") from None
+    digits = name[len(prefix) :]
+    if not (digits.isascii() and digits.isdigit()):  # int() would take " 3", "3_0" and "+3" too: other names of a course
+        raise ScenarioError(name, f"a generated course is named {prefix}SEED with an integer SEED (digits only)")
+    seed = int(digits)
     if not 0 <= seed < 2**63:
         raise ScenarioError(name, "a generated course's SEED is an integer from 0 to 2^63 - 1")
     course = generate_course(seed, classes=classes)
