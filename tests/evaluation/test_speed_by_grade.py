@@ -95,6 +95,12 @@ def test_the_speed_error_by_band_compares_the_runs_on_the_same_layout():
         ),
         row("b", {"up": {"mps": 0.9, "s": 5.0}}, {"up": {"mps": 0.8, "s": 5.0}, "down": {"mps": 0.9, "s": 4.0}}),
         row("c", {"up": {"mps": 0.5, "s": 0.5}}, {"up": {"mps": 0.8, "s": 5.0}}),  # under a second on it: not compared
+        # A driver stuck against a ledge for 200 s: its level speed says how long it stood; not compared.
+        {
+            **row("d", {"level": {"mps": 1.1, "s": 40.0}}, {"level": {"mps": 0.07, "s": 226.0}}),
+            "completed": True,
+            "driver_completed": False,
+        },
     ]
     comparison = SpeedComparison.of([], runs, "grass")
     assert set(comparison.by_grade) == {"up", "level"}

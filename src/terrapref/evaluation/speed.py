@@ -69,7 +69,8 @@ class SpeedComparison:
             its zones passed by are keyed ``avoid`` there).
         by_grade: on relief, per grade band (terrapref.evaluation.scoring.GRADE_BANDS), the
             absolute error of a run's mean speed on ground of that band [m/s], over the runs
-            where both it and the driver's run on the same layout spent :data:`GRADE_MIN_S` there.
+            where both it and the driver's run on the same layout spent :data:`GRADE_MIN_S` there,
+            both completed.
         by_roughness: likewise per roughness band (terrapref.evaluation.scoring.ROUGH_BANDS).
     """
 
@@ -244,9 +245,13 @@ def run_fields(metrics: RunMetrics, driver: RunMetrics, lateral_limit_mps2: floa
 
 def _band_errors(runs: Sequence[Mapping[str, Any]], key: str, bands: tuple[str, ...]) -> dict[str, dict[str, list[float]]]:
     """Per band of ``bands``, per layout, the absolute errors of the runs' mean speed there
-    against their driver's (``key`` and ``driver_`` + ``key``), where both spent :data:`GRADE_MIN_S` there."""
+    against their driver's (``key`` and ``driver_`` + ``key``), where both spent :data:`GRADE_MIN_S` there,
+    over the runs both completed: one that stood stuck against a ledge, or stopped short, shows
+    how long it stood, not the speeds it drives at."""
     errors: dict[str, dict[str, list[float]]] = {}
     for r in runs:
+        if not (r.get("completed", True) and r.get("driver_completed", True)):
+            continue
         mine, theirs = r.get(key) or {}, r.get(f"driver_{key}") or {}
         for band in (b for b in bands if b in mine and b in theirs):
             if min(mine[band]["s"], theirs[band]["s"]) >= GRADE_MIN_S:
