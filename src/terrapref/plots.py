@@ -349,6 +349,8 @@ class Decision:
         probs: F_t, (m,).
         chosen: the planner's choice (after the second stage, where there is one).
         w_rps: each trajectory's yaw rate [rad/s], (m,).
+        stop: why the planner stood at this frame (None: it drove ``chosen``); the steering's
+            choice is then drawn as what it was not let drive.
     """
 
     uv: np.ndarray
@@ -356,6 +358,7 @@ class Decision:
     probs: np.ndarray
     chosen: int
     w_rps: Sequence[float]
+    stop: str | None = None
 
 
 def save_decision(path: str | Path, rgb: np.ndarray, decision: Decision, title: str = "", classes=None) -> Path:
@@ -380,7 +383,11 @@ def save_decision(path: str | Path, rgb: np.ndarray, decision: Decision, title: 
             ax.text(
                 pts[-1, 0],
                 pts[-1, 1] - 8,
-                f"chosen w={w_rps[i]:+.1f}\np={probs[i]:.2f}",
+                (
+                    f"steering's w={w_rps[i]:+.1f}\nstood: {decision.stop}"
+                    if decision.stop
+                    else f"chosen w={w_rps[i]:+.1f}\np={probs[i]:.2f}"
+                ),
                 color="white",
                 fontsize=8,
                 ha="center",
@@ -399,7 +406,8 @@ def save_decision(path: str | Path, rgb: np.ndarray, decision: Decision, title: 
             )
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0.0, 1.0))
     fig.colorbar(sm, ax=ax, fraction=0.035, label="predicted probability F_t (absolute scale)")
-    handles = [Line2D([], [], color="white", lw=3, ls="--", label="planner's choice")]
+    chosen_label = f"the steering's choice; the planner stood ({decision.stop})" if decision.stop else "planner's choice"
+    handles = [Line2D([], [], color="white", lw=3, ls="--", label=chosen_label)]
     if best != chosen:
         handles.append(Line2D([], [], color="cyan", lw=2, ls=":", label="C's best (second stage overruled it)"))
     if classes is not None:  # the classes in view

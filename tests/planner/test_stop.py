@@ -121,6 +121,29 @@ def test_a_wall_of_lethal_terrain_across_the_map_ends_in_a_stop_not_in_contact(w
     assert [z.choice for z in m.zones] == [NOT_REACHED] and not m.zones[0].success
 
 
+def test_a_decision_picture_of_a_stop_says_the_planner_stood(wall: str, model: Path, tmp_path: Path):
+    """A frame kept for a picture where the planner stood: the picture said "chosen" and "planner's
+    choice" over the steering's way while the vehicle stood still."""
+    from terrapref import plots
+
+    result = run_one(RunSpec(wall, 0, "planner", str(model), PROFILE, keep_frames=(5, 300)))
+    moving, standing = result.frames
+    assert moving.stop is None and standing.stop == NO_FREE_WAY
+    drawn = []
+    original = plots.Line2D
+    plots.Line2D = lambda *a, **kw: drawn.append(kw.get("label")) or original(*a, **kw)
+    try:
+        uv, visible = np.zeros((21, 2, 2)), np.ones((21, 2), dtype=bool)
+        plots.save_decision(
+            tmp_path / "d.png",
+            np.zeros((480, 640, 3), np.uint8),
+            plots.Decision(uv, visible, standing.probs, standing.index, [0.0] * 21, standing.stop),
+        )
+    finally:
+        plots.Line2D = original
+    assert drawn[0] == "the steering's choice; the planner stood (no_free_way)"
+
+
 def test_a_planner_whose_own_way_is_blocked_drives_the_nearest_free_one_rather_than_its_own(tmp_path: Path):
     # Pure pursuit knows no terrain: from the start, 5 m right of the path, it heads for the path
     # and so for a lethal strip that begins 0.5 m left of it, under the footprint's left edge. A

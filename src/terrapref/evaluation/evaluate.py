@@ -376,13 +376,14 @@ def _figures(
             for f in r.frames:
                 rgb = model.classes.palette()[f.image]
                 x, y, yaw = f.pose
-                decision = Decision(uv, visible, f.probs, f.index, model.features.preference.control.w_rps)
+                decision = Decision(uv, visible, f.probs, f.index, model.features.preference.control.w_rps, f.stop)
                 save_decision(
                     out / f"{file_stem(name)}_frame{f.number:05d}.png",
                     rgb,
                     decision,
                     classes=model.classes,
-                    title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)",
+                    title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)"
+                    + (f"; stood: {f.stop}" if f.stop else ""),
                 )
 
 

@@ -79,6 +79,7 @@ class KeptFrame:
     probs: np.ndarray  # F_t, (m,)
     index: int  # the trajectory chosen
     image: np.ndarray  # the class image the camera saw, (H, W)
+    stop: str | None = None  # why the planner stood at it (None: it drove the trajectory chosen)
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: compared field by field where needed
@@ -371,7 +372,7 @@ def _kept_frames(planner: PlannerDriver | None, log: EpisodeLog) -> tuple[KeptFr
     if planner is None:
         return ()
     frames = [
-        KeptFrame(number, tuple(log.trace[3 * number]), d.probs, d.index, planner.image_of[number])
+        KeptFrame(number, tuple(log.trace[3 * number]), d.probs, d.index, planner.image_of[number], d.stop)
         for number, d in _scored(planner, log)
         if number in planner.image_of
     ]
