@@ -150,3 +150,20 @@ def test_a_ledge_the_vehicle_cannot_climb_is_gone_round_and_one_it_can_is_crosse
     at_ledge = dense[np.abs(dense[:, 0] - 20.25) < 0.3]
     assert len(at_ledge) and (at_ledge[:, 1] >= 14.0 + 0.9 - 0.25).all()  # round its end, clear by the margin (less a cell)
     assert not np.isfinite(route.along_path_cost)  # the path itself meets the ledge
+
+
+def test_a_ledge_across_the_whole_map_is_named_as_relief_not_as_lethal_terrain(tmp_path):
+    """A course without lethal terrain whose ledge cuts the way: the error said only "lethal
+    terrain", which the course has none of."""
+    data = {
+        "format": "terrapref-scenario/1",
+        "name": "wall",
+        "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+        "terrain": [],
+        "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+        "relief": [{"plateau": {"polygon": [[20.0, 0.0], [20.5, 0.0], [20.5, 20.0], [20.0, 20.0]], "height_m": 0.4, "edge_m": 0.0}}],
+    }
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = Model.load(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE)))
+    with pytest.raises(RouteError, match=r"ground past the vehicle's limits: a slope or a step it cannot cross\) cuts the path's start"):
+        route_over(parse_scenario(data), model)

@@ -192,7 +192,7 @@ def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, span_
         if cell is None or not np.isfinite(price[cell]):
             raise RouteError(
                 f"the path's {name} is off the map or within {config.half_width_m + config.lethal_margin_m:.1f} m "
-                "of lethal terrain or the map's edge"
+                "of lethal terrain (on relief, or of ground past the vehicle's limits) or of the map's edge"
             )
     if start == goal:
         raise RouteError(f"the path ends in the search cell it starts in ({res:g} m): there is no way to plan between them")
@@ -201,7 +201,10 @@ def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, span_
     try:
         cells = nx.dijkstra_path(graph, start[0] * w + start[1], goal[0] * w + goal[1])
     except (nx.NetworkXNoPath, nx.NodeNotFound):
-        raise RouteError("lethal terrain cuts the path's start from its end on this map") from None
+        raise RouteError(
+            "lethal terrain (on relief, or ground past the vehicle's limits: a slope or a step it cannot cross) "
+            "cuts the path's start from its end on this map"
+        ) from None
     rows, cols = np.divmod(np.asarray(cells), w)
     points = centres[rows, cols]
     points[0], points[-1] = path.point_at(0.0), path.point_at(path.length_m)
