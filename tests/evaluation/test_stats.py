@@ -267,3 +267,26 @@ def test_cluster_bootstrap_is_repeatable_and_seeded():
 
 def test_cluster_bootstrap_of_nothing_is_nan():
     assert all(math.isnan(v) for v in cluster_bootstrap([[], []]))
+
+
+def test_a_zone_the_driver_did_not_reach_is_not_compared():
+    """The driver stuck short of two zones: the planner's choices there were counted as
+    disagreements (or, where it did not reach them either, agreements), in the summary, the zones
+    written and select's rows."""
+    from terrapref.evaluation.scoring import NOT_REACHED
+    from terrapref.report.select import layout_interval
+
+    from dataclasses import replace
+
+    def short(id: str) -> ZoneResult:
+        return replace(_zone(id, NOT_REACHED, success=False), choice=NOT_REACHED, reached=False)
+
+    driver = _run("course", 0, EXPERT, [_zone("a", "mud"), short("b"), short("c")])
+    planner = _run("course", 0, PLANNER, [_zone("a", "mud"), _zone("b", "rock"), short("c")])
+    annotated = annotate_agreement([driver, planner])
+    s = summarise(annotated, PLANNER)
+    assert (s.agreement_zones, s.agreement_rate) == (1, 1.0)
+    zones = annotated[1].to_dict()["metrics"]["zones"]
+    assert ["agrees" in z for z in zones] == [True, False, False] and zones[1]["driver_choice"] == NOT_REACHED
+    rows = [{"scenario": "course", "agrees": a} for a in (True, None, None)]
+    assert layout_interval(rows)[0] == 1.0

@@ -14,14 +14,14 @@ import functools
 import os
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.relief_style import ReliefStyle
-from terrapref.evaluation.scoring import ReliefZoneResult, RunMetrics, ZoneResult, ZoneScoring, score_run
+from terrapref.evaluation.scoring import NOT_REACHED, ReliefZoneResult, RunMetrics, ZoneResult, ZoneScoring, score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceivedDriver, Perceiver, PerceptionModel
@@ -95,10 +95,20 @@ class KeptRun:
 
 @dataclass(frozen=True)
 class ZoneAgreement:
-    """The synthetic driver's choice in a zone of the same run, and whether the planner made it (SPEC 12)."""
+    """The synthetic driver's choice in a zone of the same run, and whether the planner made it
+    (SPEC 12); a zone the driver did not reach shows no choice to make, and is not compared."""
 
     driver_choice: str
     agrees: bool
+
+    @property
+    def compared(self) -> bool:
+        """Whether the driver made a choice here (it reached the zone) for the planner's to be compared with."""
+        return self.driver_choice != NOT_REACHED
+
+    def to_dict(self) -> dict:
+        """As JSON: the driver's choice, and the agreement where compared."""
+        return {"driver_choice": self.driver_choice, **({"agrees": self.agrees} if self.compared else {})}
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: compared field by field where needed
@@ -123,14 +133,14 @@ class RunResult:
         zones = [z.to_dict() for z in self.metrics.zones]
         if self.agreement is None:
             return zones
-        return [z | asdict(a) for z, a in zip(zones, self.agreement, strict=True)]
+        return [z | a.to_dict() for z, a in zip(zones, self.agreement, strict=True)]
 
     def metrics_dict(self) -> dict:
         """The metrics as JSON, the zones as :meth:`zone_dicts` writes them, the relief zones
         (on relief) likewise with the driver's choice and the agreement where compared."""
         out = self.metrics.to_dict() | {"zones": self.zone_dicts()}
         if self.relief_agreement is not None:
-            out["relief_zones"] = [z | asdict(a) for z, a in zip(out["relief_zones"], self.relief_agreement, strict=True)]
+            out["relief_zones"] = [z | a.to_dict() for z, a in zip(out["relief_zones"], self.relief_agreement, strict=True)]
         return out
 
     def to_dict(self) -> dict:
@@ -462,15 +472,22 @@ def _with_agreement(run: RunResult, ref: RunResult | None) -> RunResult:
     return replace(run, agreement=agreement, relief_agreement=relief)
 
 
+def compared_zones(runs: Sequence[RunResult], relief: bool = False) -> list[ZoneAgreement]:
+    """The zones (``relief``: the relief zones) of ``runs`` compared with the driver's run: those
+    annotated, less those the driver did not reach."""
+    found = (r.relief_agreement if relief else r.agreement for r in runs)
+    return [a for agreement in found if agreement is not None for a in agreement if a.compared]
+
+
 def summarise(results: list[RunResult], driver: str) -> Summary:
     """Zone success, agreement (where annotated), collisions, completion and cross-track error of ``driver``'s runs."""
     runs = [r for r in results if r.driver == driver]
     zones = [z for r in runs for z in r.metrics.zones]
     n = len(zones)
     ok = sum(z.success for z in zones)
-    compared = [a for r in runs if r.agreement is not None for a in r.agreement]
+    compared = compared_zones(runs)
     agree = sum(a.agrees for a in compared)
-    relief = [a for r in runs if r.relief_agreement is not None for a in r.relief_agreement]
+    relief = compared_zones(runs, relief=True)
     relief_agree = sum(a.agrees for a in relief)
     completed = sum(r.metrics.completed for r in runs)
     stops: dict[str, float] = {}

@@ -22,7 +22,17 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, Summary, annotate_agreement, run_many, summarise
+from terrapref.evaluation.runner import (
+    EXPERT,
+    PLANNER,
+    RunResult,
+    RunSpec,
+    Summary,
+    annotate_agreement,
+    compared_zones,
+    run_many,
+    summarise,
+)
 from terrapref.evaluation.stats import rate_text
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
@@ -449,7 +459,7 @@ def _summary_table(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[s
     for name in [*(r.name for r in recipes), "driver"]:
         chosen = [r.result for r in runs if r.recipe == name and r.result.scenario in test_names]
         zones = [z for r in chosen for z in r.metrics.zones]
-        compared = [a for r in chosen if r.agreement is not None for a in r.agreement]
+        compared = compared_zones(chosen)
         s = summarise(chosen, PLANNER if name != "driver" else EXPERT)
         agreement = rate_text(sum(a.agrees for a in compared), len(compared)) if compared else "—"
         lines.append(
@@ -482,7 +492,7 @@ def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
         cells = []
         for name in names:
             chosen = [r.result for r in runs if r.recipe == recipe.name and r.perception == name and r.result.scenario in test_names]
-            compared = [a for r in chosen if r.agreement is not None for a in r.agreement]
+            compared = compared_zones(chosen)
             zones = [z for r in chosen for z in r.metrics.zones]
             s = summarise(chosen, PLANNER)
             cells.append(

@@ -32,7 +32,7 @@ import numpy as np
 
 from terrapref.demos.relief_style import ReliefStyle, parse_relief_style
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, relief_agreement, run_many, zone_agrees
-from terrapref.evaluation.scoring import RunMetrics
+from terrapref.evaluation.scoring import NOT_REACHED, RunMetrics
 from terrapref.evaluation.speed import SpeedComparison, driver_lateral_limit, run_fields
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.fileio import write_text_atomic
@@ -494,7 +494,7 @@ def _zone_rows(who: dict, mine: RunMetrics, theirs: RunMetrics) -> list[dict]:
                 "kind": zone_kind(z.label),
                 "choice": z.choice,
                 "driver_choice": d.choice,
-                "agrees": zone_agrees(z, d),
+                "agrees": zone_agrees(z, d) if d.choice != NOT_REACHED else None,  # the driver made no choice here
                 "success": z.success,
                 "driver_success": d.success,
                 "speed_mps": z.speed_mps,
@@ -503,7 +503,13 @@ def _zone_rows(who: dict, mine: RunMetrics, theirs: RunMetrics) -> list[dict]:
         )
     agrees = relief_agreement(mine.relief_zones, theirs.relief_zones) or ()
     for i, (z, d, a) in enumerate(zip(mine.relief_zones or (), theirs.relief_zones or (), agrees, strict=False)):
-        zone = {"zone": f"relief{i}", "kind": RELIEF_ZONE, "choice": z.choice, "driver_choice": d.choice, "agrees": a}
+        zone = {
+            "zone": f"relief{i}",
+            "kind": RELIEF_ZONE,
+            "choice": z.choice,
+            "driver_choice": d.choice,
+            "agrees": a if d.choice != NOT_REACHED else None,
+        }
         rows.append({**who, **zone, "success": None, "driver_success": None, "from_m": z.from_m, "to_m": z.to_m})
     return rows
 
@@ -533,7 +539,8 @@ def layout_interval(rows: Sequence[dict]) -> tuple[float, float, float]:
     """
     by_layout: dict[str, list[bool]] = {}
     for r in rows:
-        by_layout.setdefault(r["scenario"], []).append(r["agrees"])
+        if r["agrees"] is not None:  # a zone the driver did not reach is not compared
+            by_layout.setdefault(r["scenario"], []).append(r["agrees"])
     return cluster_bootstrap(list(by_layout.values()))
 
 
@@ -698,7 +705,8 @@ def _selection_table(
             completed = _completion(its)
             per_seed = {}
             for r in sub:
-                per_seed.setdefault(r["seed"], []).append(r["agrees"])
+                if r["agrees"] is not None:
+                    per_seed.setdefault(r["seed"], []).append(r["agrees"])
             seeds = ", ".join(f"{sum(v) / len(v):.0%}" for v in per_seed.values()) if order is not None else "-"
             name = "**all**" if order is None else " > ".join(order)
             rate, lo, hi = layout_interval(sub)
@@ -711,7 +719,7 @@ def _selection_table(
                 bars.append((f"{recipe}, all orders" if order is None else " > ".join(_chosen(order, _lethal_of(sel))), rate, (lo, hi)))
     misses: dict[tuple, int] = {}
     for r in rows:
-        if not r["agrees"]:
+        if r["agrees"] is False:
             key = (r["recipe"], r["kind"], r["choice"], r["driver_choice"])
             misses[key] = misses.get(key, 0) + 1
     if misses:

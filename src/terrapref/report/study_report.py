@@ -510,8 +510,8 @@ def _ablation_section(runs: list[StudyRun], base: _Baselines) -> list[str]:
 
 def agreement(planner: list[StudyRun], driver: list[StudyRun]) -> tuple[int, int]:
     """Zones (agreeing, compared) where the planner's runs made the choice of the driver's run of the
-    same preference order on the same layout."""
-    by = {(r.tag.order, r.scenario, z.id): z for r in driver for z in r.metrics.zones}
+    same preference order on the same layout (those it reached: where it did not, it made no choice)."""
+    by = {(r.tag.order, r.scenario, z.id): z for r in driver for z in r.metrics.zones if z.reached}
     pairs = [(z, by[(r.tag.order, r.scenario, z.id)]) for r in planner for z in r.metrics.zones if (r.tag.order, r.scenario, z.id) in by]
     return sum(zone_agrees(p, d) for p, d in pairs), len(pairs)
 
