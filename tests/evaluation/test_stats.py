@@ -273,10 +273,10 @@ def test_a_zone_the_driver_did_not_reach_is_not_compared():
     """The driver stuck short of two zones: the planner's choices there were counted as
     disagreements (or, where it did not reach them either, agreements), in the summary, the zones
     written and select's rows."""
+    from dataclasses import replace
+
     from terrapref.evaluation.scoring import NOT_REACHED
     from terrapref.report.select import layout_interval
-
-    from dataclasses import replace
 
     def short(id: str) -> ZoneResult:
         return replace(_zone(id, NOT_REACHED, success=False), choice=NOT_REACHED, reached=False)
