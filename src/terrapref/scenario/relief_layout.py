@@ -1,7 +1,8 @@
 """Relief for a course that has none: features placed by the course's own geometry, from a seed.
 
-The path is cut into the stretches between its zones and the relief it has (a zone's situation,
-and a teaching course's relief situation, stays on the ground it was made for), each at most
+The path is cut into the stretches between its zones and the relief it has (the path through a
+zone's situation, and through a teaching course's relief situation, gets no feature; a feature
+beside the path or at a bend may still reach into a zone's ground), each at most
 :data:`STRETCH_M` long, the first :data:`CLEAR_M` of the path (the start) and its last metres
 left out. Each stretch gets one feature drawn at random among
 those that fit in it, a bump or a dip only where no larger one fits:
