@@ -392,10 +392,16 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     for _ in range(20):  # 2 m: the person pressed Esc long before the first zone
         writer.append(frame.time_s, frame.pose, frame.image, (1.0, 0.0), 10)
         frame = sim.step((1.0, 0.0))
-    writer.close({"completed": False, "quit": True})
+    writer.close({"completed": False, "quit": True, "tips": 0, "stuck": 23, "max_roll_deg": 0.0, "max_pitch_deg": 26.57})
     summary = summarise(read_recording(tmp_path / "rec"))
     lines = summary.lines()
     assert lines[0].endswith("quit by the driver")
+    # How the drive ended, on relief with its tips, times stuck and attitude (inspect said "complete" alone).
+    assert "drive      did not reach the goal; 0 tips, 23 times stuck; roll at most 0.0 deg, pitch 26.6 deg" in lines
+    assert (
+        lines.index("scenario   demo_course")
+        == lines.index("drive      did not reach the goal; 0 tips, 23 times stuck; roll at most 0.0 deg, pitch 26.6 deg") + 1
+    )
     zone_lines = [line for line in lines if line.endswith("not reached")]
     assert zone_lines and all(" -> -" in line for line in zone_lines)
     # A long label (a triple of long class names) keeps the table in line: every arrow in one column.

@@ -28,6 +28,7 @@ class RecordingSummary:
     quit: bool = False  # the person ended the drive (Esc) before the goal
     lethal_contact: str | None = None  # what the drive's summary says of lethal terrain under the vehicle
     order: tuple[str, ...] | None = None  # the driver's declared preference order; None: the recording declares none
+    run: dict | None = None  # what the drive's summary in meta.json says of it (None: a log that holds none)
 
     @property
     def status(self) -> str:
@@ -35,21 +36,37 @@ class RecordingSummary:
             return "partial"
         return "quit by the driver" if self.quit else "complete"
 
+    @property
+    def outcome(self) -> str | None:
+        """How the drive ended, as its summary says: whether it reached the goal and, on relief, its
+        tips, times stuck and largest roll and pitch; None where the recording holds no summary."""
+        run = self.run or {}
+        if "completed" not in run:
+            return None
+        text = "reached the goal" if run["completed"] else "did not reach the goal"
+        if "tips" in run or "stuck" in run:
+            text += f"; {run.get('tips', 0)} tips, {run.get('stuck', 0)} times stuck"
+        if "max_roll_deg" in run and "max_pitch_deg" in run:
+            text += f"; roll at most {float(run['max_roll_deg']):.1f} deg, pitch {float(run['max_pitch_deg']):.1f} deg"
+        return text
+
     def lines(self) -> list[str]:
         out = [
             f"status     {self.status}",
             f"frames     {self.frames}",
             f"duration   {self.duration_s:.1f} s",
+            *([f"drive      {self.outcome}"] if self.outcome else []),
             f"scenario   {self.scenario.name}",
             f"order      {' > '.join(self.order)}"
             if self.order
             else "order      none declared (zones are scored under the class table's order; training needs the driver's)",
             "labels     (index: w [rad/s]  count)",
         ]
+        at = 4 + bool(self.outcome)  # after the scenario's line
         if not self.scenario.has_terrain:
-            out.insert(4, "map        none: the log holds the path and the driven poses, not the ground (the figure draws those alone)")
+            out.insert(at, "map        none: the log holds the path and the driven poses, not the ground (the figure draws those alone)")
         if self.lethal_contact is not None:
-            out.insert(5, f"lethal     the drive had lethal terrain under the vehicle: {self.lethal_contact}")
+            out.insert(at + 1, f"lethal     the drive had lethal terrain under the vehicle: {self.lethal_contact}")
         peak = max(int(self.label_counts.max()), 1)
         for i, n in enumerate(self.label_counts):
             out.append(f"  {i:3d}: {self.control.w_rps[i]:+5.2f}  {int(n):6d}  {'#' * round(40 * int(n) / peak)}")
@@ -91,6 +108,7 @@ def summarise(recording: Recording) -> RecordingSummary:
         quit=bool(run.get("quit")),
         lethal_contact=recording.lethal_contact(),
         order=tuple(meta["profile"]) if meta.get("profile") else None,
+        run=run,
     )
 
 
@@ -104,6 +122,8 @@ def save_driven_path(summary: RecordingSummary, recording: Recording, out: str |
         summary.scenario,
         summary.world,
         [("driven", recording.poses[:, :2], "red")],
-        title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames)",
+        title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames"
+        + (f"; {summary.outcome}" if summary.outcome else "")
+        + ")",
         marks=missed,
     )
