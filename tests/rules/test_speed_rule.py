@@ -419,7 +419,9 @@ def test_the_fit_recovers_what_grades_shed_up_and_down():
     line = next(
         x for x in SpeedRule(SpeedConfig(), kept.model, kept).lines(FEATURES.feature_classes, frozenset()) if x.startswith("grades")
     )
-    assert line.startswith(f"grades: nothing learned up ({kept.grade_frames[0]} frames on one class past 3 deg up: slowing there explains")
+    assert line.startswith(
+        f"grades: nothing learned up ({kept.grade_frames[0]} frames on one class past 3 deg up faster than 0.15 m/s: slowing there explains"
+    )
 
 
 def test_rough_bands_within_a_millimetre_per_second_of_the_best_are_alike_and_the_middle_one_is_kept():

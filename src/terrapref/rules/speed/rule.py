@@ -442,7 +442,8 @@ class SpeedRule(Rule):
         """What a degree of grade ``way`` (index ``i``: up 0, down 1) sheds, with its interval and frames."""
         frames = self.fit.grade_frames[i] if self.fit is not None else 0
         if per_deg is None:
-            shown = f"{frames} frames on one class past {LEVEL_DEG:g} deg {way}"
+            # Frames at the least speed are not counted: the grade may have held the speed there, short of what it sheds.
+            shown = f"{frames} frames on one class past {LEVEL_DEG:g} deg {way} faster than {MIN_SPEED_MPS + 0.05:g} m/s"
             why = f"fewer than {MIN_FRAMES}" if frames < MIN_FRAMES else "slowing there explains them no better"
             return f"nothing learned {way} ({shown}: {why})"
         interval = self.fit.grade_intervals[i] if self.fit is not None else None
