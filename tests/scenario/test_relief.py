@@ -160,6 +160,29 @@ def test_a_start_that_would_tip_the_vehicle_is_refused(height_m: float, refused:
     ]
 
 
+@pytest.mark.parametrize(("height_m", "refused"), [(0.5, True), (0.14, False)])
+def test_a_start_astride_a_step_higher_than_the_vehicle_climbs_is_refused(height_m: float, refused: bool) -> None:
+    """A ledge between the axles at the start (the front wheels on top, the rear ones below): 0.5 m
+    left the vehicle stuck for a whole recording, validated as "ok" (its pitch, 26.6 deg, is
+    within the limit); 0.14 m it climbs."""
+    ledge = {"plateau": {"polygon": [[1.2, 0.0], [20.0, 0.0], [20.0, 10.0], [1.2, 10.0]], "height_m": height_m, "edge_m": 0.0}}
+    scenario = parse_scenario({**copy.deepcopy(FLAT), "relief": [ledge]}, "ledge.yaml")
+    sim = Simulation(scenario)
+    sim.reset()
+    for _ in range(30):  # 1 s at 1 m/s: the rear wheels reach the ledge
+        sim.step((1.0, 0.0))
+    assert (sim.stuck > 0) is refused
+    if not refused:
+        assert drivable(scenario) is scenario
+        return
+    with pytest.raises(ScenarioError) as err:
+        drivable(scenario)
+    assert err.value.lines() == [
+        "ledge.yaml: start: (1, 5) stands the vehicle astride a step of 0.50 m, higher than it climbs (0.15 m): "
+        "its rear wheels could not follow its front ones; start it off the step"
+    ]
+
+
 @pytest.mark.parametrize(("height_m", "refused"), [(0.6, True), (0.58, False)])
 def test_a_start_that_would_tip_the_vehicle_begun_as_a_later_seed_begins_is_refused(height_m: float, refused: bool) -> None:
     """A ridge along the path beside the start: 0.6 m rolls the vehicle 22.6 deg at the start but

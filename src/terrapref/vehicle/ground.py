@@ -111,6 +111,18 @@ class GroundContact:
                 return True
         return False
 
+    def step_under(self, pose: Pose) -> float:
+        """The highest step [m] under the body at ``pose`` that its rear wheels would have to climb
+        to follow its front ones: along each side from the rear wheel to the front one, the
+        largest rise of the ground over a cell (read every half cell; 0 on smooth ground)."""
+        fl, fr, rl, rr = self._wheel_points(pose)
+        step = 0.0
+        for (x0, y0), (x1, y1) in ((rl, fl), (rr, fr)):
+            n = max(2, math.ceil(2.0 * math.hypot(x1 - x0, y1 - y0) / self.resolution_m))
+            z = [self.height_at(x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n) for k in range(n + 1)]
+            step = max(step, *(z[k + 2] - z[k] for k in range(n - 1)))
+        return step
+
     def attitude(self, pose: Pose) -> Attitude:
         """The body's height and orientation at ``pose``."""
         fl, fr, rl, rr = self._wheels(pose)
@@ -196,11 +208,18 @@ def start_attitude(scenario, config: VehicleConfig | None = None) -> Attitude:
 
 def start_attitudes(scenario, poses: tuple[Pose, ...], config: VehicleConfig | None = None) -> tuple[Attitude, ...]:
     """:func:`start_attitude` at each of ``poses`` (within :data:`START_SHIFT_M` of the start), in their order."""
+    contact = _start_contact(scenario, config)
+    return tuple(LEVEL for _ in poses) if contact is None else tuple(contact.attitude(pose) for pose in poses)
+
+
+def _start_contact(scenario, config: VehicleConfig | None) -> GroundContact | None:
+    """The ground round ``scenario``'s start under the vehicle of ``config``: the height field's
+    cells within :data:`START_REACH_M` of it, each read as the whole field gives it (None: no relief)."""
     from terrapref.world.height_compiled import height_at
     from terrapref.world.relief import height_field
 
     if not scenario.has_relief:
-        return tuple(LEVEL for _ in poses)
+        return None
     config = config or VehicleConfig()
     res, (ny, nx) = scenario.resolution_m, scenario.grid_shape
     reach = math.ceil(START_REACH_M / res)
@@ -215,8 +234,7 @@ def start_attitudes(scenario, poses: tuple[Pose, ...], config: VehicleConfig | N
         def height_at_point(self, x: float, y: float) -> float:
             return height_at(part, 1.0 / res, x - x0, y - y0)
 
-    contact = GroundContact(Part(), config)
-    return tuple(contact.attitude(pose) for pose in poses)
+    return GroundContact(Part(), config)
 
 
 def _past_by(attitude: Attitude, config: VehicleConfig) -> float:
@@ -229,7 +247,9 @@ def drivable(scenario, config: VehicleConfig | None = None, seeds: int = 0):
     start whose ground tips the vehicle of ``config`` (default: the default vehicle) past its roll
     or pitch limit is refused, as one on lethal terrain is (a run would count a tip before it moved);
     so is one where it would tip begun a little to the side or off the heading, as an evaluation's
-    seeds after the first begin (:func:`start_poses`; with ``seeds``, where each of that many does).
+    seeds after the first begin (:func:`start_poses`; with ``seeds``, where each of that many does),
+    and one astride a step higher than it climbs (its rear wheels could not follow: a run would
+    count it stuck before it got anywhere).
 
     Raises:
         ScenarioError: naming the scenario's ``start``.
@@ -238,6 +258,15 @@ def drivable(scenario, config: VehicleConfig | None = None, seeds: int = 0):
 
     config = config or VehicleConfig()
     poses = start_poses(scenario.start, seeds)
+    contact = _start_contact(scenario, config)
+    step = contact.step_under(poses[0]) if contact is not None else 0.0
+    if step > config.max_step_m:
+        raise ScenarioError(
+            scenario.source or scenario.name,
+            f"({scenario.start[0]:g}, {scenario.start[1]:g}) stands the vehicle astride a step of {step:.2f} m, higher than it "
+            f"climbs ({config.max_step_m:g} m): its rear wheels could not follow its front ones; start it off the step",
+            field="start",
+        )
     attitudes = start_attitudes(scenario, poses, config)
     tipped = [(pose, attitude) for pose, attitude in zip(poses, attitudes, strict=True) if GroundContact.past_limits(attitude, config)]
     if not tipped:
