@@ -1077,6 +1077,16 @@ def relief_with(i: int, kind: str, **fields: Any) -> dict[str, Any]:
         (relief_with(1, "mound", height_m="high"), "relief[1].mound.height_m", "expected a number, got string 'high'"),
         (relief_with(1, "mound", height_m=1e4), "relief[1].mound.height_m", "must be at most 1000 m either way"),
         (
+            relief_with(1, "mound", height_m=5e-324),
+            "relief[1].mound.height_m",
+            "must be at least 1 mm either way: the ground would not change",
+        ),  # was ok: flat ground called relief
+        (
+            relief_with(1, "mound", height_m=-0.0009),
+            "relief[1].mound.height_m",
+            "must be at least 1 mm either way: the ground would not change",
+        ),
+        (
             relief_with(1, "mound", center=[40.0, 5.0]),
             "relief[1].mound",
             "lies wholly off the map (bounds x 37..43, y 2..8; map 0..20 x 0..10)",
@@ -1104,6 +1114,11 @@ def relief_with(i: int, kind: str, **fields: Any) -> dict[str, Any]:
         ),
         (relief_with(2, "ridge", width_m=-2), "relief[2].ridge.width_m", "must be > 0"),
         (relief_with(3, "plateau", edge_m=-1), "relief[3].plateau.edge_m", "must be >= 0 (0: a vertical step)"),
+        (
+            relief_with(3, "plateau", edge_m=0.001),  # was ok: a step on the grid, called a slope
+            "relief[3].plateau.edge_m",
+            "must be at least one cell (0.1 m at world.resolution_m 0.1) or 0 (a vertical step): finer relief falls between the cells",
+        ),
         (relief_with(3, "plateau", edge_m=None), "relief[3].plateau.edge_m", "missing"),
         (
             relief_with(3, "plateau", polygon=[[1, 1], [2, 2], [3, 3]]),

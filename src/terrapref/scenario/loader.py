@@ -29,6 +29,7 @@ _TOP_KEYS = frozenset({"format", "name", "description", "world", "terrain", "pat
 _REQUIRED_KEYS = frozenset({"format", "name", "world", "path"})
 _SHAPE_KEYS = ("polygon", "circle", "rectangle")
 MAX_RELIEF_M = 1000.0  # the largest height or noise amplitude of one relief entry [m]
+MIN_RELIEF_M = 0.001  # the least, either way: finer relief changes no height a vehicle or a depth camera tells [m]
 MAX_RELIEF_REACH_M = 1e6  # relief's points lie within this distance of the map [m]
 MAX_WAVELENGTH_M = 1e4  # the longest wavelength of noise [m]
 
@@ -516,13 +517,13 @@ def _relief(c: _Checker, raw: Any, world: _World) -> list[ReliefEntry]:
 
 
 def _relief_height(c: _Checker, value: Any, field: str, *, positive: bool = False) -> float | None:
-    """A height [m] of at most :data:`MAX_RELIEF_M` either way, and not 0 (relief that leaves the ground as it was)."""
+    """A height [m] of at most :data:`MAX_RELIEF_M` either way, and at least :data:`MIN_RELIEF_M` (less leaves the ground as it was)."""
     x = c.number(value, field, positive=positive)
     if x is not None and abs(x) > MAX_RELIEF_M:
         c.fail(field, f"must be at most {MAX_RELIEF_M:g} m either way")
         return None
-    if x == 0:
-        c.fail(field, "must not be 0: the ground would not change")
+    if x is not None and abs(x) < MIN_RELIEF_M:
+        c.fail(field, f"must be at least {1000 * MIN_RELIEF_M:g} mm either way: the ground would not change")
         return None
     return x
 
@@ -619,12 +620,14 @@ def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
     if edge is not None and edge < 0:
         c.fail(f"{f}.edge_m", "must be >= 0 (0: a vertical step)")
         edge = None
+    if edge:  # a slope finer than a cell is a step on the grid: 0 says so
+        edge = _at_least_cells(c, edge, f"{f}.edge_m", 1, world, " or 0 (a vertical step)")
     if polygon is None or height is None or edge is None:
         return None
     return Plateau(polygon, height, edge)
 
 
-def _at_least_cells(c: _Checker, value: float | None, field: str, cells: int, world: _World) -> float | None:
+def _at_least_cells(c: _Checker, value: float | None, field: str, cells: int, world: _World, note: str = "") -> float | None:
     """``value`` [m] where it spans at least ``cells`` cells of the map; else said (a feature
     finer than the grid falls between the cells' centres, and the ground would not change) and None."""
     if value is None or world.resolution_m is None or value >= cells * world.resolution_m:
@@ -632,7 +635,8 @@ def _at_least_cells(c: _Checker, value: float | None, field: str, cells: int, wo
     span = "one cell" if cells == 1 else f"{cells} cells"
     c.fail(
         field,
-        f"must be at least {span} ({cells * world.resolution_m:g} m at world.resolution_m {world.resolution_m:g}): finer relief falls between the cells",
+        f"must be at least {span} ({cells * world.resolution_m:g} m at world.resolution_m {world.resolution_m:g}){note}: "
+        "finer relief falls between the cells",
     )
     return None
 
