@@ -304,7 +304,11 @@ _SCENARIO = (
         ("r.yaml", _ROBOT.replace("command: /cmd", "command: /odom") + "labels: rellis3d\n", ("topics.command", "topics.odometry")),
         ("r.yaml", _ROBOT.replace("command: /cmd", "command: /c md") + "labels: rellis3d\n", ("topics.command", "topic name")),
         ("r.yaml", _ROBOT + "labels: rellis3d\nstop: {step_m: 5}\n", ("stop", "step_m must be at most 0.5")),
-        ("s.yaml", _SCENARIO + "relief: [{mound: {center: [8, 5], radius: 2, height_m: 0}}]\n", ("relief[0].mound.height_m", "not be 0")),
+        (
+            "s.yaml",
+            _SCENARIO + "relief: [{mound: {center: [8, 5], radius: 2, height_m: 0}}]\n",
+            ("relief[0].mound.height_m", "at least 1 mm"),
+        ),
         ("s.yaml", _SCENARIO + "relief: [{noise: {amplitude_m: 0.5, wavelength_m: 1e308, seed: 1}}]\n", ("wavelength_m", "at most")),
     ],
 )

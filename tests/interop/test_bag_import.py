@@ -614,7 +614,8 @@ def measured(tmp_path_factory) -> dict:
     }
     out: dict = {"robot": robot}
     for name, kind in kinds.items():
-        bag = write_synthetic_bag(root / f"{name}.mcap", "mcap", max_seconds=10.0, speed_mps=FAST_MPS, commands=False, **kind)
+        # 20 s: labelled by the odometry's motion, 10 s did not show the offset rule what holding off the path costs.
+        bag = write_synthetic_bag(root / f"{name}.mcap", "mcap", max_seconds=20.0, speed_mps=FAST_MPS, commands=False, **kind)
         rec = root / f"rec_{name}"
         out[name] = {"bag": bag, "report": import_bag(bag, load_robot(robot), rec, show_progress=False), "rec": read_recording(rec)}
     assert main(["train", str(root / "rec_twist"), "--out", str(root / "taught.safetensors"), "--epochs", "5"]) == 0  # as fast's

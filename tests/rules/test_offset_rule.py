@@ -658,12 +658,46 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         ({"extra": 1}, "rules[0].relief"),
         ({"hidden_on_path": math.nan}, "rules[0].relief.hidden_on_path"),
         ({"hidden_on_path": "1"}, "rules[0].relief.hidden_on_path"),
+        (
+            {"weights": [0.0] * 9 + [5.0] + [0.0] * 10},
+            "rules[0].relief.weights",
+        ),  # a band that rewards steep ground: it rode a ridge's flank
     ):
         bad_block = {**block, "relief": {**block["relief"], **change}}
         bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**meta, "rules": [bad_block]})
         with pytest.raises(UserError) as exc:
             load_policy(bad)
         assert exc.value.problems[0].field == field
+
+
+def test_a_detour_that_does_not_cost_is_refused_in_a_file_and_from_a_fit(tmp_path, monkeypatch):
+    """A detour's weight of 0 or more (holding off the path costs nothing, or pays): every price is
+    read against it, and the rule steers away from the path. A short drive's fit gave +0.0045, and
+    its prices were printed negative, outside their own intervals."""
+    import terrapref.rules.offset.rule as offset_rule
+    from terrapref.learning.train import FitData
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    meta = _offset_meta(DRIVER_LIKE)
+    for detour in (0.0, 0.0045):
+        weights = [*DRIVER_LIKE[:-2], detour, DRIVER_LIKE[-1]]
+        bad = {**meta, "rules": [{**meta["rules"][0], "weights": weights}]}
+        with pytest.raises(UserError) as exc:
+            load_policy(save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), bad))
+        assert exc.value.problems[0].field == "rules[0].weights" and "must be below 0" in str(exc.value)
+    fitted = offset_rule.OffsetFit(np.array([*DRIVER_LIKE[:-2], 0.0045, DRIVER_LIKE[-1]]), 5.0, 1.0, {}, 100)
+    monkeypatch.setattr(offset_rule, "fit_offset_utility", lambda *a, **k: fitted)
+    arrays = {"features": np.zeros((1, 1, 1)), "near_m": np.zeros(1), "intent_m": np.zeros(1)}
+
+    class Data(FitData):
+        def __init__(self):
+            pass
+
+        def rule_data(self, name):
+            return {"geometry": offset_rule.OffsetGeometry().to_dict()}, arrays
+
+    with pytest.raises(UserError, match=r"did not show what holding off the path costs \(its weight came out \+0.0045"):
+        OffsetConfig().fit(Data())
 
 
 def test_the_relief_prices_intervals_cover_the_true_price_when_frames_come_in_runs():

@@ -174,6 +174,13 @@ class OffsetConfig(RuleConfig):
             raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")
         columns = (relief, RELIEF_BANDS_DEG) if relief is not None else None
         fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
+        detour = float(fitted.weights[-2])
+        if not detour < 0.0:  # every price is read against it, and a price of holding off the path below 0 steers away from it
+            raise UserError(
+                "offset rule",
+                f"the drive did not show what holding off the path costs (its weight came out {detour:+g}, not below 0): "
+                "its prices cannot be read; drive longer along a path kept, as a teaching course shows it (terrapref course)",
+            )
         if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view
             geometry = replace(geometry, map_min_evidence=max(geometry.map_min_evidence, RELIEF_MIN_EVIDENCE))
         utility = OffsetUtility(
@@ -276,6 +283,8 @@ class OffsetRule(Rule):
         except (TypeError, ValueError, KeyError, IndexError) as exc:
             raise where.error("geometry", f"invalid ({exc})") from None
         weights = vector(block, "weights", context.features.n_terrain + 3, where)
+        if not weights[-2] < 0.0:  # as the fit keeps it: the cost of holding off the path
+            raise where.error("weights", f"the detour's weight (the second last) must be below 0, got {weights[-2]:g}")
         near = number(block, "near_m", where, positive=True)
         if "pursuit_lookahead_m" in block and "pursuit_m" not in block:  # its name in files before it was pursuit_m
             block = {**block, "pursuit_m": block["pursuit_lookahead_m"]}
@@ -409,8 +418,8 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
     if relief["bands_deg"] != list(RELIEF_BANDS_DEG):
         raise where.error("relief.bands_deg", f"expected the bands this version reads, {list(RELIEF_BANDS_DEG)}")
     weights = finite_array(relief["weights"], (2 * len(RELIEF_BANDS_DEG),))
-    if weights is None:
-        raise where.error("relief.weights", f"expected {2 * len(RELIEF_BANDS_DEG)} finite numbers")
+    if weights is None or (weights > 0.0).any():  # each band adds a price, as the fit keeps them (steeper never costs less)
+        raise where.error("relief.weights", f"expected {2 * len(RELIEF_BANDS_DEG)} finite numbers, each at most 0")
     roll, grade = (math.nan if v is None else float(v) for v in shown)
     interval = None
     if "price_interval" in relief:
