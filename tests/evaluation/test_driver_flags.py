@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from terrapref.demos.relief_style import parse_relief_style
-from terrapref.evaluation.speed import driver_flags, relief_named_by_some
+from terrapref.evaluation.speed import driver_flags, relief_styles_differ
 
 
 def _driver(style: str = "default", speeds=(), relief: str | None = None) -> dict:
@@ -30,9 +30,10 @@ def test_a_mix_of_drivers_with_and_without_a_relief_style_is_told():
     def meta(*drivers):
         return {"data": {"recordings": [{"driver": d} for d in drivers]}}
 
-    assert relief_named_by_some(meta(_driver(relief="default"), _driver()))
-    assert not relief_named_by_some(meta(_driver(relief="default"), _driver(relief="bold")))
-    assert not relief_named_by_some(meta(_driver(), _driver()))
+    assert relief_styles_differ(meta(_driver(relief="default"), _driver()))
+    assert relief_styles_differ(meta(_driver(relief="bold"), _driver(relief="cautious")))  # two styles: compared as if flat, unsaid
+    assert not relief_styles_differ(meta(_driver(relief="bold"), _driver(relief="bold")))
+    assert not relief_styles_differ(meta(_driver(), _driver()))
 
 
 def test_a_relief_style_is_told_by_the_flag_that_gives_it_and_every_way_it_drives():

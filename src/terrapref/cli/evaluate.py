@@ -80,7 +80,7 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     from terrapref.demos.relief_style import parse_relief_style
     from terrapref.demos.speed_style import check_rough_speed, driver_style, parse_speeds
     from terrapref.evaluation.evaluate import Evaluation, scoring_profile
-    from terrapref.evaluation.speed import relief_named_by_some, trained_driver, trained_relief
+    from terrapref.evaluation.speed import relief_styles_differ, trained_driver, trained_relief
     from terrapref.planner.model import Model
     from terrapref.terrain import PreferenceProfile
     from terrapref.vehicle import VehicleConfig
@@ -106,9 +106,9 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta, args.model)
     if args.relief_style is not None and relief is not None:
         _note_flat(args.scenarios, model.classes)
-    if args.relief_style is None and relief is None and relief_named_by_some(meta):
+    if args.relief_style is None and relief is None and relief_styles_differ(meta):
         print(
-            f"note: {args.model}: some of its recordings' drivers took relief by a style and some as if flat; the comparison "
+            f"note: {args.model}: its recordings' drivers took relief by different styles (or some as if flat); the comparison "
             "driver takes it as if flat: give --relief-style",
             file=sys.stderr,
         )

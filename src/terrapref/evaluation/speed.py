@@ -374,10 +374,11 @@ def _common_relief(drivers: Sequence[Any], source: str = "") -> ReliefStyle | No
     return style
 
 
-def relief_named_by_some(meta: Mapping[str, Any]) -> bool:
-    """Whether some of a model's recordings name a relief style for their synthetic driver and some none."""
-    named = [found is not None for found in _recorded_reliefs(_recorded_drivers(meta))]
-    return any(named) and not all(named)
+def relief_styles_differ(meta: Mapping[str, Any]) -> bool:
+    """Whether a model's recordings' synthetic drivers took relief differently: some by a relief
+    style and some as if flat, or by two styles (no one driver to compare the model with)."""
+    found = _recorded_reliefs(_recorded_drivers(meta))
+    return any(f is not None for f in found) and any(f != found[0] for f in found)
 
 
 RUN_XY_STEP_S = 0.1  # a run's kept path (RunResult.xy): its reference point every third 30 Hz tick [s]
