@@ -394,6 +394,17 @@ def test_a_pair_open_before_the_last_drive_and_after_it_is_left_saying_why():
     )
 
 
+def test_a_pair_the_last_drive_never_compared_is_left_saying_which_course_shows_it():
+    """The last drive was no course of the pair (another drive, not a follow-up): "driving it again
+    would show the same" was said of it as of a follow-up that showed the pair in vain."""
+    earlier = _report({("dirt", "bush"): (0.02, 79)})
+    plan = plan_follow_up(_report({("dirt", "bush"): (0.02, 79)}), [_took({("dirt", "bush"): (67, 12)}), _took({})], earlier, "other")
+    assert plan.left == (
+        "dirt vs bush: open before other and after it (margin 0.02, standard error 0.10, 79 frames): driving it again "
+        "would show the same (other never compared them: `course --after` of the drives before it shows them)",
+    )
+
+
 def test_a_pair_the_last_drive_reopened_without_choosing_against_it_is_shown_again():
     """The last drive never compared water with dirt, but its frames moved dirt's weight."""
     earlier = _report({("water", "dirt"): (0.28, 29)})

@@ -868,7 +868,7 @@ def test_course_after_names_what_no_further_course_settles_and_writes_nothing(tm
     assert main(["course", "--after", str(fig7_recording), "--out", str(tmp_path / "more.yaml")]) == 0
     assert capsys.readouterr().out.splitlines() == [
         f"note: {why}",
-        "the drive left 1 pair open that no further course settles (above); nothing written",
+        "the drive left 1 pair open that a further drive of this loop would not settle (above); nothing written",
     ]
     assert list(tmp_path.iterdir()) == []
 
@@ -916,7 +916,7 @@ def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_one_follow_u
     assert main(["record", str(more), "--profile", profile, "--out", str(me_more), "--quiet"]) == 0
     assert main(["course", "--after", str(me), str(me_more), "--out", str(more2)]) == 0
     printed = capsys.readouterr().out
-    assert "open that no further course settles (above); nothing written" in printed and not more2.exists()
+    assert "open that a further drive of this loop would not settle (above); nothing written" in printed and not more2.exists()
     assert sum(read_recording(r).duration_s for r in (me, me_more)) <= 12 * 60  # simulated time, not the test's
 
 

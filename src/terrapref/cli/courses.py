@@ -314,7 +314,7 @@ def _says_what_is_left(plan: FollowUp, paths: Sequence[Path]) -> bool:
         print(f"note: {line}")
     if not plan.anything:
         what = " and ".join(x for x in (_count(plan.left, "pair"), _count(plan.relief_left, "relief lesson")) if x)
-        print(f"the {drives} left {what} open that no further course settles (above); nothing written")
+        print(f"the {drives} left {what} open that a further drive of this loop would not settle (above); nothing written")
         return False
     if plan.open:
         neighbours = f"; beside them, their neighbours in the learned order: {_pairs(plan.neighbours)}" if plan.neighbours else ""

@@ -414,9 +414,14 @@ def plan_follow_up(
         if before is None:
             show.append((p.first, p.second))
         elif not before.identified:
+            never = not sum(favoured(drives[-1], p.first, p.second))  # the last drive was no course that shows them
             left.append(
                 f"{p.first} vs {p.second}: open before {last} and after it ({now}, {p.frames} frames): driving it again "
-                f"would show the same; the planner's choice between them stays a guess"
+                + (
+                    f"would show the same ({last} never compared them: `course --after` of the drives before it shows them)"
+                    if never
+                    else "would show the same; the planner's choice between them stays a guess"
+                )
             )
         else:
             x, y = before.first, before.second  # the order identified before the last drive
