@@ -555,8 +555,13 @@ def test_a_block_with_a_top_speed_on_rough_ground_reads_back_and_a_half_one_is_r
         ({"rough_m": 0.02}, "rough_m"),
         ({"rough_m": 0.02, "rough_mps": 0.01}, "rough_mps"),
         ({"rough_m": -1.0, "rough_mps": 0.8}, "rough_m"),
+        # Past what any drive shows (a file written by hand was read and printed 300 digits long):
+        ({"rough_m": 1e300, "rough_mps": 0.8}, "rough_m"),
+        ({"rough_m": 0.02, "rough_mps": 1e300}, "rough_mps"),
+        ({"up_mps_per_deg": 1e300, "down_mps_per_deg": 0.02}, "up_mps_per_deg"),
+        ({"up_mps_per_deg": 0.02, "down_mps_per_deg": 5.0}, "down_mps_per_deg"),
     )
-    for changes, field in bad:  # half of it; a top speed below the least; a roughness below 0
+    for changes, field in bad:  # half of it; a top speed below the least; a roughness below 0; past any drive
         with pytest.raises(UserError) as raised:
             _read(_block(**changes))
         assert [p.field for p in raised.value.problems] == [f"rules[0].{field}"]

@@ -245,6 +245,10 @@ def _to_world(points: np.ndarray, pose: Pose) -> np.ndarray:
     return np.stack([x + points[..., 0] * c - points[..., 1] * s, y + points[..., 0] * s + points[..., 1] * c], axis=-1)
 
 
+# The most a degree of grade may shed in a model file [m/s per deg]: a top speed of 2 m/s gone in 2 deg.
+MAX_SHED_MPS_PER_DEG = 1.0
+
+
 @dataclass(frozen=True)
 class SpeedRule(Rule):
     """A fitted speed rule (``fit``: how the fit went, for a rule just fitted)."""
@@ -355,10 +359,15 @@ class SpeedRule(Rule):
             )
         if optional["rough_mps"] is not None and optional["rough_mps"] < MIN_SPEED_MPS:
             raise where.error("rough_mps", f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
+        for name, most in (("up_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("down_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("rough_m", 1.0)):
+            if optional[name] is not None and optional[name] > most:  # past what a drive shows: a file written by hand
+                raise where.error(name, f"expected at most {most:g}, got {optional[name]:g}")
         try:
             config = SpeedConfig(number(block, "half_width_m", where, 0.6), number(block, "max_speed_mps", where, 2.0))
         except ValueError as exc:
             raise where.error("", str(exc)) from None
+        if optional["rough_mps"] is not None and optional["rough_mps"] > config.max_speed_mps:
+            raise where.error("rough_mps", f"expected at most the rule's top speed, {config.max_speed_mps:g} m/s")
         model = SpeedModel(
             tuple(float(v) for v in speeds),
             number(block, "preview_m", where, positive=True),
