@@ -346,22 +346,7 @@ class SpeedRule(Rule):
         lethal = block.get("lethal", [])
         if not (isinstance(lethal, list) and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= k for c in lethal)):
             raise where.error("lethal", f"expected terrain columns 0..{k}")
-        optional = {}
-        for name in ("lateral_accel_mps2", "near_lethal_m", "near_lethal_mps"):
-            optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
-        for name in ("up_mps_per_deg", "down_mps_per_deg"):  # absent from a flat drive's file
-            optional[name] = None if block.get(name) is None else number(block, name, where, low=0.0)
-        for name in ("rough_m", "rough_mps"):  # likewise
-            optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
-        if (optional["rough_m"] is None) != (optional["rough_mps"] is None):
-            raise where.error(
-                "rough_m", "rough_m and rough_mps come together: the roughness past which the top speed holds, and that speed"
-            )
-        if optional["rough_mps"] is not None and optional["rough_mps"] < MIN_SPEED_MPS:
-            raise where.error("rough_mps", f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
-        for name, most in (("up_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("down_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("rough_m", 1.0)):
-            if optional[name] is not None and optional[name] > most:  # past what a drive shows: a file written by hand
-                raise where.error(name, f"expected at most {most:g}, got {optional[name]:g}")
+        optional = _optional_fields(block, where)
         try:
             config = SpeedConfig(number(block, "half_width_m", where, 0.6), number(block, "max_speed_mps", where, 2.0))
         except ValueError as exc:
@@ -478,6 +463,26 @@ class SpeedRule(Rule):
     def _classes(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[tuple[int, str]]:
         """(column, class) of every terrain column a speed is kept for: ``names``, then the background; not the lethal ones."""
         return [(col, name) for col, name in enumerate((*names, self.background)) if name not in lethal]
+
+
+def _optional_fields(block: Mapping[str, Any], where: Where) -> dict[str, float | None]:
+    """A speed rule block's fields a drive may not have fitted (None where absent), each checked
+    against what a drive can show (a UserError naming the field)."""
+    optional = {}
+    for name in ("lateral_accel_mps2", "near_lethal_m", "near_lethal_mps"):
+        optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
+    for name in ("up_mps_per_deg", "down_mps_per_deg"):  # absent from a flat drive's file
+        optional[name] = None if block.get(name) is None else number(block, name, where, low=0.0)
+    for name in ("rough_m", "rough_mps"):  # likewise
+        optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
+    if (optional["rough_m"] is None) != (optional["rough_mps"] is None):
+        raise where.error("rough_m", "rough_m and rough_mps come together: the roughness past which the top speed holds, and that speed")
+    if optional["rough_mps"] is not None and optional["rough_mps"] < MIN_SPEED_MPS:
+        raise where.error("rough_mps", f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
+    for name, most in (("up_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("down_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("rough_m", 1.0)):
+        if optional[name] is not None and optional[name] > most:  # past what a drive shows: a file written by hand
+            raise where.error(name, f"expected at most {most:g}, got {optional[name]:g}")
+    return optional
 
 
 def _interval_of(value: object) -> tuple[float, float] | None:
