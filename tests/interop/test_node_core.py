@@ -506,6 +506,24 @@ def test_on_a_robot_with_depth_each_image_takes_the_depth_image_of_the_nearest_s
     assert core.decided == 2 and core.skipped[NO_DEPTH] == 2 and sum(core.skipped.values()) == 2
 
 
+def test_depth_images_that_come_after_the_next_label_image_are_each_waited_for(setup, tmp_path):
+    """A depth pipeline 0.25 s behind the segmentation at 10 Hz: each label image's depth comes
+    after two more label images. Only the newest image waited, so each was superseded before its
+    depth came and the node never decided (246 of 247 frames superseded on a log)."""
+    core, handed = _depth_core(setup, tmp_path)
+    seg = "sensor_msgs/msg/CompressedImage"
+    core.on_depth(_depth(0.0, 5.0), "/depth")
+    decided = []
+    for k in range(1, 9):  # label image k at 0.1 k s; its depth image comes after label image k + 2
+        if (d := core.on_image(seg, _label(setup, 0.1 * k))) is not None:
+            decided.append(d)
+        if k >= 3 and (d := core.on_depth(_depth(0.1 * (k - 2), 10.0 * (k - 2)), "/depth")) is not None:
+            decided.append(d)
+    assert [round(d.stamp_s - EPOCH, 6) for d in decided] == [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
+    assert [float(np.nanmax(d.image)) for _, d in handed] == [10.0, 20.0, 30.0, 40.0, 50.0, 60.0]  # each with its own
+    assert core.skipped["superseded while waiting for odometry or depth"] == 0
+
+
 def test_a_depth_image_the_node_cannot_use_is_refused_by_name_and_counted(setup, tmp_path):
     from terrapref.errors import UserError
 

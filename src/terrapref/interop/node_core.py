@@ -73,6 +73,9 @@ if TYPE_CHECKING:
 ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
 DEPTH_WAIT_S = 0.5  # how far an image's stamp may be past the newest depth image's for it to wait for a nearer one [s]
+# The images kept waiting at once: a depth camera's images that come later than the next label image
+# (its pipeline slower than the segmentation's) are each still waited for (1.6 s of a 10 Hz camera).
+PENDING_KEPT = 16
 DEPTH_KEPT = 32  # depth images held at most for label images still to come (the newest): about 1 s of a 30 Hz camera
 BEFORE_CLOCK = "images before the node's clock started"  # why an image that came before a simulated clock's first tick is skipped
 NO_DEPTH = f"without a depth image within {1000 * DEPTH_PAIRING_S:.0f} ms"  # why a frame on a robot with depth is skipped
@@ -170,7 +173,9 @@ class PlannerNodeCore:
         }
         self.decided = 0  # frames decided on
         self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
-        self._pending: tuple[str, object, str, float] | None = None  # an image waiting for odometry or a depth image at its stamp
+        self._pending: list[
+            tuple[str, object, str, float]
+        ] = []  # images waiting for odometry or a depth image at their stamps, oldest first
         self._lut: np.ndarray | None = None  # the robot's label ids -> class ids, once the calibration has come
         self._undistort: np.ndarray | None = None  # a distorted lens's pinhole pixel -> its pixel (flat; -1 outside)
         self._lock = threading.RLock()  # ROS calls back from a thread per topic
@@ -309,13 +314,19 @@ class PlannerNodeCore:
             return self._resume()
 
     def _resume(self) -> RuntimeDecision | None:
-        """The decision on the image waiting, once what it waits for has come: odometry at or
-        past its stamp, and on a robot with depth, a depth image at or past it (or none still
-        worth waiting for)."""
-        pending = self._pending
-        if pending is None or not self.odometry or self.odometry[-1][0] < pending[3] or self._waits_for_depth(pending[3]):
+        """The decision on the newest image waiting whose wait is over (odometry at or past its
+        stamp, and on a robot with depth, a depth image at or past it, or none still worth waiting
+        for); the images older than it are superseded, the newer ones wait on."""
+        ready = [
+            i
+            for i, (_, _, _, t) in enumerate(self._pending)
+            if self.odometry and self.odometry[-1][0] >= t and not self._waits_for_depth(t)
+        ]
+        if not ready:
             return None
-        (msgtype, image, topic, stamp), self._pending = self._pending, None
+        i = ready[-1]
+        self.skipped["superseded while waiting for odometry or depth"] += i
+        (msgtype, image, topic, stamp), self._pending = self._pending[i], self._pending[i + 1 :]
         pose = self.pose_at(stamp)
         if pose is None:
             self.skipped["without odometry at the stamp"] += 1
@@ -379,8 +390,9 @@ class PlannerNodeCore:
         it, or None when it is skipped (counted in :attr:`skipped`) or waits for odometry.
 
         An image newer than the last odometry (they travel on separate topics and either may
-        come first) waits, the newest one only, until odometry at or past its stamp arrives
-        (:meth:`on_odometry` then decides on it), for up to :data:`ODOMETRY_WAIT_S`. On a robot
+        come first) waits until odometry at or past its stamp arrives (:meth:`on_odometry` then
+        decides on the newest image whose wait is over, and drops the older ones), for up to
+        :data:`ODOMETRY_WAIT_S`; up to :data:`PENDING_KEPT` images wait at once. On a robot
         with depth it waits the same way for a depth image at or past its stamp, while the
         newest depth image is at most :data:`DEPTH_WAIT_S` older (:meth:`on_depth` then decides
         on it, with the nearest one within :data:`DEPTH_PAIRING_S`); with none that near it is
@@ -412,11 +424,14 @@ class PlannerNodeCore:
                 self.skipped["without odometry at the stamp"] += 1
                 return None
             if pose is not None and not self._waits_for_depth(t):
+                older = [p for p in self._pending if p[3] <= t]  # decided on a newer image, the runtime would ignore them
+                self.skipped["superseded while waiting for odometry or depth"] += len(older)
+                self._pending = [p for p in self._pending if p[3] > t]
                 return self._decide(msgtype, msg, topic, t, pose)
-            if self._pending is not None:
-                self.skipped["superseded while waiting for odometry or depth"] += 1
-            if self._pending is None or t > self._pending[3]:  # the newest image waits
-                self._pending = (msgtype, msg, topic, t)
+            self._pending = sorted([*self._pending, (msgtype, msg, topic, t)], key=lambda p: p[3])
+            if len(self._pending) > PENDING_KEPT:  # the oldest gives way
+                self.skipped["superseded while waiting for odometry or depth"] += len(self._pending) - PENDING_KEPT
+                self._pending = self._pending[-PENDING_KEPT:]
             return None
 
     def _decide(self, msgtype: str, msg, topic: str, t: float, pose: Pose) -> RuntimeDecision | None:
