@@ -489,6 +489,8 @@ def test_on_a_robot_with_depth_each_image_takes_the_depth_image_of_the_nearest_s
     from terrapref.vehicle.ground import Attitude
 
     core, handed = _depth_core(setup, tmp_path)
+    said = []
+    core.on_problem = said.append  # the nodes' logs say it once
     seg = "sensor_msgs/msg/CompressedImage"
     core.on_depth(_depth(0.07, 7.0), "/depth")
     core.on_depth(_depth(0.11, 11.0), "/depth")
@@ -504,6 +506,12 @@ def test_on_a_robot_with_depth_each_image_takes_the_depth_image_of_the_nearest_s
     expected = Attitude(*(k * 0.25 for k in TILT_PER_S))  # interpolated between the poses at 0.2 and 0.3 s
     np.testing.assert_allclose(handed[1][1].attitude, expected, atol=1e-6)  # (stamps on the epoch-like clock: to 2e-7 s)
     assert core.decided == 2 and core.skipped[NO_DEPTH] == 2 and sum(core.skipped.values()) == 2
+    # A skipped frame is said where it happens (the log named no depth while the node stood still).
+    assert (
+        said
+        == ["/depth: a label image without a depth image within 50 ms of its stamp: skipped, and the robot stops (stale) while they are"]
+        * 2
+    )
 
 
 def test_depth_images_that_come_after_the_next_label_image_are_each_waited_for(setup, tmp_path):

@@ -230,6 +230,10 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
             if proc is not None:
                 os.killpg(proc.pid, 15)
                 proc.wait(timeout=30)
+    said = node.stdout.read() + node.stderr.read()
+    assert "terrapref: limits: 2 m/s, 1 rad/s; on relief 25 deg of roll, 30 of pitch, a step of 0.15 m" in said, said[
+        -2000:
+    ]  # as ROS 2's start
     heard = json.loads((tmp_path / "got.json").read_text())
     assert heard["before_clock"] is None  # a frame before the first /clock is skipped, not answered with a stop
     got = np.array(heard["commands"])

@@ -173,6 +173,7 @@ class PlannerNodeCore:
         }
         self.decided = 0  # frames decided on
         self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
+        self.on_problem: Callable[[str], None] = lambda line: None  # told why a frame is skipped, where the log should say it
         self._pending: list[
             tuple[str, object, str, float]
         ] = []  # images waiting for odometry or a depth image at their stamps, oldest first
@@ -440,6 +441,9 @@ class PlannerNodeCore:
             paired = self.depth.nearest(t)
             if paired is None:
                 self.skipped[NO_DEPTH] += 1
+                self.on_problem(
+                    f"{self.robot.depth_topic}: a label image {NO_DEPTH} of its stamp: skipped, and the robot stops (stale) while they are"
+                )
                 return None
             depth = DepthFrame(undistorted(paired[1], self._undistort, np.float32(np.nan)), self.attitude_at(t))
         # No time in the error: a node says each problem once, and a stream of bad frames is one problem.
@@ -734,6 +738,20 @@ class NodeLog:
                 self.info(f"{self.prefix}moving on")
             else:
                 self.warn(f"{self.prefix}stopping: {reason} ({REASONS.get(reason, reason)})")
+
+
+def limits_line(robot: RobotConfig, watchdog_s: float) -> str:
+    """What the node holds the robot to, the line it logs at its start."""
+    limits, stop = robot.limits, robot.stop
+    return (
+        f"limits: {limits.max_speed_mps:g} m/s, {limits.max_yaw_rate_rps:g} rad/s"
+        + (f", speeding up at {limits.max_accel_mps2:g} m/s^2 at most" if limits.max_accel_mps2 is not None else "")
+        + f"; on relief {limits.max_roll_deg:g} deg of roll, {limits.max_pitch_deg:g} of pitch, a step of {limits.max_step_m:g} m"
+        + f"; at the goal within {stop.goal_tolerance_m:g} m"
+        + (f" and {stop.goal_yaw_tolerance_deg:g} deg" if stop.goal_yaw_tolerance_deg is not None else "")
+        + f"; off the path beyond {stop.off_path_m:g} m; brakes at {stop.decel_mps2:g} m/s^2 {stop.reaction_s:g} s after a frame,"
+        + f" {stop.margin_m:g} m short; stops {watchdog_s:g} s after its last decision by the wall clock"
+    )
 
 
 def report_line(core: PlannerNodeCore, command: str, log: NodeLog | None = None) -> str:

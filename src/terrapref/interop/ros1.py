@@ -127,7 +127,7 @@ class _Node:
         from std_msgs.msg import Bool
         from visualization_msgs.msg import MarkerArray
 
-        from terrapref.interop.node_core import NodeLog
+        from terrapref.interop.node_core import NodeLog, limits_line
 
         self.rospy, self.core, self.robot, self.opts = rospy, core, robot, opts
         self.failure: list[UserError] = []
@@ -151,6 +151,7 @@ class _Node:
         self.arrived_pub, self.Bool, self.arrived = rospy.Publisher("~arrived", Bool, queue_size=1, latch=True), Bool, None
         self.markers = _TrajectoryMarkers(model, rospy)
         core.on_decision = self.on_decision
+        core.on_problem = self.log.say
         rospy.Subscriber(robot.topics["camera_info"], CameraInfo, self.on_camera_info, queue_size=1)
         rospy.Subscriber(robot.topics["odometry"], rospy.AnyMsg, self.on_odometry, queue_size=50)
         if core.path is None and robot.path_topic:
@@ -164,6 +165,7 @@ class _Node:
             if core.depth_info_topic:
                 rospy.Subscriber(core.depth_info_topic, CameraInfo, self.on_depth_info, queue_size=1)
         self.publish_arrived()
+        self.log.info(f"terrapref: {limits_line(robot, core.watchdog.limit_s)}")  # as the ROS 2 node says it
         if robot.rules:
             self.log.info(f"terrapref: rule settings over the model file's: {'; '.join(robot.rules.lines())}")
         self.done = threading.Event()

@@ -47,9 +47,10 @@ from terrapref.interop.node_core import (
     PlannerNodeCore,
     TrajectoryShapes,
     Watchdog,
+    limits_line,
     report_line,
 )
-from terrapref.interop.robot import GIVEN_TOPIC_NAME, RobotConfig
+from terrapref.interop.robot import GIVEN_TOPIC_NAME
 from terrapref.interop.ros_decode import time_s
 
 NODE_NAME = "terrapref"
@@ -311,20 +312,6 @@ def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: boo
     return out
 
 
-def _limits_line(robot: RobotConfig, watchdog_s: float) -> str:
-    """What the node holds the robot to, the line it logs at its start."""
-    limits, stop = robot.limits, robot.stop
-    return (
-        f"limits: {limits.max_speed_mps:g} m/s, {limits.max_yaw_rate_rps:g} rad/s"
-        + (f", speeding up at {limits.max_accel_mps2:g} m/s^2 at most" if limits.max_accel_mps2 is not None else "")
-        + f"; on relief {limits.max_roll_deg:g} deg of roll, {limits.max_pitch_deg:g} of pitch, a step of {limits.max_step_m:g} m"
-        + f"; at the goal within {stop.goal_tolerance_m:g} m"
-        + (f" and {stop.goal_yaw_tolerance_deg:g} deg" if stop.goal_yaw_tolerance_deg is not None else "")
-        + f"; off the path beyond {stop.off_path_m:g} m; brakes at {stop.decel_mps2:g} m/s^2 {stop.reaction_s:g} s after a frame,"
-        + f" {stop.margin_m:g} m short; stops {watchdog_s:g} s after its last decision by the wall clock"
-    )
-
-
 class _Node:
     """The node's DDS endpoints and timers around a :class:`PlannerNodeCore`."""
 
@@ -354,6 +341,7 @@ class _Node:
             "clock": clock.on_clock,
         }
         core.on_decision = self.on_decision
+        core.on_problem = self.log.say
         # Publishers first: a subscription may hear a message (a latched path) the moment it is
         # made, and its handler publishes (~/arrived, a command).
         for e in self.endpoints:
@@ -370,7 +358,7 @@ class _Node:
                 )
         self.publish_mount()
         self.publish_arrived()
-        self.log.info(_limits_line(robot, core.watchdog.limit_s))
+        self.log.info(limits_line(robot, core.watchdog.limit_s))
         if robot.rules:
             self.log.info(f"rule settings over the model file's: {'; '.join(robot.rules.lines())}")
         self.log.info(
