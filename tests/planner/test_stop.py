@@ -446,7 +446,7 @@ def test_a_runs_mcap_says_when_and_why_the_planner_stopped(tmp_path: Path, wall:
 @pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_a_drive_through_lethal_terrain_says_so_and_training_on_it_warns(tmp_path: Path, wall: str, capsys):
     from terrapref.cli import main
-    from terrapref.cli.train import _warn_lethal_contact
+    from terrapref.cli.train import _warn_recordings
     from terrapref.demos.recording import read_recording
 
     rec = tmp_path / "rec"
@@ -457,5 +457,5 @@ def test_a_drive_through_lethal_terrain_says_so_and_training_on_it_warns(tmp_pat
     assert contact is not None and contact.startswith("1 entry, ")
     assert main(["inspect", str(rec)]) == 0
     assert "the drive had lethal terrain under the vehicle: 1 entry" in capsys.readouterr().out
-    _warn_lethal_contact([rec])
+    _warn_recordings([rec])
     assert f"warning: {rec}: the drive had lethal terrain under the vehicle" in capsys.readouterr().err

@@ -107,6 +107,13 @@ def _one_error(capsys, *words: str) -> str:
 # --- The default table: one lethal class, its column named after it ------------------------------
 
 
+def _record_it(printed: str) -> tuple[str, list[str]]:
+    """The course and the flags of the record command ``course --after`` printed ("record it: ...")."""
+    found = re.search(r"\(record it: terrapref record (\S+)((?: --\S+ \S+)*?) --out DIR\)", printed)
+    assert found, printed
+    return found.group(1), found.group(2).split()
+
+
 def test_the_default_table_keeps_its_columns():
     d = default_classes()
     assert d.names == ("grass", "non_traversable", "water", "rock", "mud")
@@ -792,7 +799,7 @@ def test_a_courses_table_goes_with_its_drive_to_the_follow_up_training_and_evalu
     printed = capsys.readouterr().out
     left_open = "pairs open for a follow-up: "
     assert left_open in printed and "tree" in printed.split(left_open)[1].split(";")[0]  # no tree was driven beside
-    assert f"(record it: terrapref record {more} --out DIR)" in printed, "the command that works, not a --classes FILE placeholder"
+    assert _record_it(printed)[0] == str(more), "the command that works, not a --classes FILE placeholder"
     assert resolve_scenario(str(more)).classes == load_classes(small)
     assert main(["course", "--after", str(me), str(tiny_recording), "--out", str(tmp_path / "x.yaml")]) == 2
     _one_error(capsys, str(tiny_recording), "classes", "give drives of one table")
@@ -831,8 +838,9 @@ def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open
         "the drive left 1 pair open for a follow-up: mud vs tree; beside them, their neighbours in the learned order: grass vs mud"
         in printed
     )
-    assert f"(record it: terrapref record {more} --out DIR)" in printed, "the command that works, not a --classes FILE placeholder"
-    assert main(["record", str(more), "--out", str(me_more), "--quiet"]) == 0
+    course_named, flags = _record_it(printed)
+    assert course_named == str(more), "the command that works, not a --classes FILE placeholder"
+    assert main(["record", str(more), *flags, "--out", str(me_more), "--quiet"]) == 0  # as it says (the drive's order with it)
     assert read_recording(me_more).classes == load_classes(small)
     # Both drives together leave nothing open; nothing is written.
     assert main(["course", "--after", str(me), str(me_more), "--out", str(tmp_path / "more2.yaml")]) == 0
