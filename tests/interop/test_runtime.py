@@ -266,12 +266,18 @@ def test_a_depth_image_checked_as_a_robot_s_come(cruising):
     assert runtime.decide(ids, 1.0, pose, depth=DepthFrame(depth, None, 1.03)).stop is None  # level; 30 ms apart
     with pytest.raises(ValueError, match="stamped -0.4 s from its label image"):
         runtime.decide(ids, 1.1, pose, depth=DepthFrame(depth, None, 0.7))
+    assert runtime.decide(ids, 0.9, pose) is None  # out of order: it changes nothing, with depth or without
     with pytest.raises(ValueError, match="without its depth image, after frames with one"):
         runtime.decide(ids, 1.2, pose)
     assert runtime.refused["with a depth image stamped more than 50 ms from it"] == 1
     assert runtime.refused["without a depth image, after frames with one"] == 1
     assert runtime.status_at(1.0 + runtime.hold_s + 0.1) == ((0.0, 0.0), "stale")
     assert not runtime.notes  # a model of flat ground: nothing to say of frames without depth
+    fresh = _runtime(cruising)
+    fresh.set_path(PATH + [0.0, 12.0])
+    with pytest.raises(ValueError, match="ahead of the clock"):  # a frame refused commits the runtime to nothing
+        fresh.decide(ids, 1e6, pose, now_s=10.0, depth=DepthFrame(depth))
+    assert fresh.decide(ids, 10.0, pose, now_s=10.0) is not None
 
 
 @pytest.mark.parametrize("dead", [np.nan, 0.0, np.inf])

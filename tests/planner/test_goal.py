@@ -194,3 +194,13 @@ def test_a_vehicle_that_passes_the_end_beside_it_comes_back_to_its_goal(fast_mod
     first = reasons.index("goal")
     assert abs(poses[first, 1] - 20.0) <= 0.5 + 0.1 and poses[first, 0] > 29.5  # on the end's line (a frame's travel), at or past the end
     assert all(r == "goal" for r in reasons[first:])
+
+
+def test_a_patch_of_lethal_terrain_on_the_path_s_end_is_gone_round_and_the_goal_still_reached(fast_model):
+    """A vehicle that goes round a lethal patch lying on the path's end passes the end beside it:
+    no longer at its goal there, it must come back to it and stand, not circle."""
+    patch = {"class": "non_traversable", "circle": {"center": [29.5, 20.0], "radius": 0.8}}
+    poses, commands, reasons, _ = _drive(fast_model, parse_scenario({**OPEN, "terrain": [patch]}), (20.0, 20.0, 0.0), frames=300)
+    first = reasons.index("goal")
+    assert all(r == "goal" for r in reasons[first:]) and not commands[first:, 0].any()
+    assert abs(poses[first, 1] - 20.0) <= 0.5 + 0.1 and poses[first, 0] > 29.5  # on the end's line, at or past the end

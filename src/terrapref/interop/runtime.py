@@ -263,6 +263,7 @@ class PlannerRuntime:
             )
         if self.last is not None and stamp_s <= self.last.stamp_s:
             return None
+        self._taken_with(depth_image)
         if self._sent is None:  # nothing given out yet: the robot's speed at this frame is where the speed rises from
             self._sent = (float(stamp_s), 0.0 if speed_mps is None else abs(float(speed_mps)))
         going = None if speed_mps is None else abs(float(speed_mps))
@@ -292,16 +293,8 @@ class PlannerRuntime:
     def _depth(self, depth: DepthFrame | None, stamp_s: float) -> tuple[np.ndarray | None, Attitude]:
         """``depth``'s image as float32 and its attitude, checked against the camera and the
         label image's ``stamp_s`` (a ValueError says what is wrong; refused frames are counted);
-        (None, level) without one, which frames with depth before it refuse."""
+        (None, level) without one (:meth:`_taken_with` then says what a frame without one is)."""
         if depth is None:
-            if self._with_depth:
-                self.refused[NO_DEPTH] += 1
-                raise ValueError(
-                    "a frame without its depth image, after frames with one: refused (a depth camera that stopped), "
-                    "so the command in force goes stale; give each label image its DepthFrame"
-                )
-            if self.model.reads_relief and not any(note.startswith(FLAT_NOTE) for note in self.notes):
-                self.notes.append(FLAT_NOTE)
             return None, LEVEL
         image = np.asarray(depth.image)
         if image.shape != self.shape or image.dtype.kind != "f":
@@ -321,8 +314,22 @@ class PlannerRuntime:
                     f"a depth image stamped {float(depth.stamp_s) - stamp_s:+.3g} s from its label image; refused "
                     f"(more than {1000 * DEPTH_PAIRING_S:.0f} ms: a depth camera that froze, or another frame's)"
                 )
-        self._with_depth = True
         return image.astype(np.float32, copy=False), attitude
+
+    def _taken_with(self, depth_image: np.ndarray | None) -> None:
+        """A frame to be decided on, with its depth image or without: once frames have come with
+        one, a frame without is refused (counted); a model taught relief without one is noted."""
+        if depth_image is not None:
+            self._with_depth = True
+            return
+        if self._with_depth:
+            self.refused[NO_DEPTH] += 1
+            raise ValueError(
+                "a frame without its depth image, after frames with one: refused (a depth camera that stopped), "
+                "so the command in force goes stale; give each label image its DepthFrame"
+            )
+        if self.model.reads_relief and not any(note.startswith(FLAT_NOTE) for note in self.notes):
+            self.notes.append(FLAT_NOTE)
 
     def _named(self, image: np.ndarray) -> np.ndarray:
         """``image`` with class ids the table does not name refused (ValueError), or made unknown."""

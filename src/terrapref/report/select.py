@@ -704,10 +704,11 @@ def _selection_table(
             coll += f" (and {tips} tips, {stuck} stuck)" if tips or stuck else ""
             completed = _completion(its)
             per_seed = {}
-            for r in sub:
+            for r in sub:  # every seed in its place, "-" where no zone of it was compared
+                per_seed.setdefault(r["seed"], [])
                 if r["agrees"] is not None:
-                    per_seed.setdefault(r["seed"], []).append(r["agrees"])
-            seeds = ", ".join(f"{sum(v) / len(v):.0%}" for v in per_seed.values()) if order is not None else "-"
+                    per_seed[r["seed"]].append(r["agrees"])
+            seeds = ", ".join(f"{sum(v) / len(v):.0%}" if v else "-" for v in per_seed.values()) if order is not None else "-"
             name = "**all**" if order is None else " > ".join(order)
             rate, lo, hi = layout_interval(sub)
             lines.append(

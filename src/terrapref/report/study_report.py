@@ -653,7 +653,7 @@ def _imitation_table(plan: StudyPlan, taught: list[StudyRun]) -> list[str]:
             d = {z.id: z for z in drv.metrics.zones}
             o = {z.id: z for z in oth.metrics.zones}
             zs = [(z, o[z.id], d[z.id]) for z in own.metrics.zones if z.id in o and z.id in d]
-            agree.append([100.0 * (float(zone_agrees(a, c)) - float(zone_agrees(b, c))) for a, b, c in zs])
+            agree.append([100.0 * (float(zone_agrees(a, c)) - float(zone_agrees(b, c))) for a, b, c in zs if c.reached])
             track.append(
                 [
                     abs(oth.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)

@@ -259,12 +259,13 @@ def drivable(scenario, config: VehicleConfig | None = None, seeds: int = 0):
     config = config or VehicleConfig()
     poses = start_poses(scenario.start, seeds)
     contact = _start_contact(scenario, config)
-    step = contact.step_under(poses[0]) if contact is not None else 0.0
+    step = max(contact.step_under(pose) for pose in poses) if contact is not None else 0.0  # where any seed begins
     if step > config.max_step_m:
         raise ScenarioError(
             scenario.source or scenario.name,
-            f"({scenario.start[0]:g}, {scenario.start[1]:g}) stands the vehicle astride a step of {step:.2f} m, higher than it "
-            f"climbs ({config.max_step_m:g} m): its rear wheels could not follow its front ones; start it off the step",
+            f"({scenario.start[0]:g}, {scenario.start[1]:g}) stands the vehicle astride a step of {step:.2f} m (there, or begun "
+            f"a little to its side as an evaluation's later seeds may be), higher than it climbs ({config.max_step_m:g} m): its "
+            "rear wheels could not follow its front ones; start it off the step",
             field="start",
         )
     attitudes = start_attitudes(scenario, poses, config)

@@ -351,8 +351,6 @@ class SpeedRule(Rule):
             config = SpeedConfig(number(block, "half_width_m", where, 0.6), number(block, "max_speed_mps", where, 2.0))
         except ValueError as exc:
             raise where.error("", str(exc)) from None
-        if optional["rough_mps"] is not None and optional["rough_mps"] > config.max_speed_mps:
-            raise where.error("rough_mps", f"expected at most the rule's top speed, {config.max_speed_mps:g} m/s")
         model = SpeedModel(
             tuple(float(v) for v in speeds),
             number(block, "preview_m", where, positive=True),
@@ -479,7 +477,9 @@ def _optional_fields(block: Mapping[str, Any], where: Where) -> dict[str, float 
         raise where.error("rough_m", "rough_m and rough_mps come together: the roughness past which the top speed holds, and that speed")
     if optional["rough_mps"] is not None and optional["rough_mps"] < MIN_SPEED_MPS:
         raise where.error("rough_mps", f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
-    for name, most in (("up_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("down_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("rough_m", 1.0)):
+    # Past what any drive shows (a robot's log may be fast: 30 m/s, a robot file's top speed at most).
+    bounds = (("up_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("down_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("rough_m", 1.0), ("rough_mps", 30.0))
+    for name, most in bounds:
         if optional[name] is not None and optional[name] > most:  # past what a drive shows: a file written by hand
             raise where.error(name, f"expected at most {most:g}, got {optional[name]:g}")
     return optional
