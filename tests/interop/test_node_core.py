@@ -277,7 +277,7 @@ def test_a_decision_goes_out_before_the_live_view_and_is_not_stale_however_long_
 
 
 def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup, tmp_path):
-    from terrapref.errors import ConfigError, UserError
+    from terrapref.errors import UserError
     from terrapref.interop.node_core import NodeOptions
 
     text = (
@@ -299,15 +299,27 @@ def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup
         NodeOptions().resolved(lambda name, default: 50.0 if name == "~goal_tolerance_m" else default)
     with pytest.raises(UserError, match=r"~max_speed_mps: expected 0.1 to 30, got 1e\+09"):
         NodeOptions().resolved(lambda name, default: 1e9 if name == "~max_speed_mps" else default)
-    for bad, field in (
-        ("limits: {max_speed_mps: fast}", "limits.max_speed_mps"),
-        ("limits: {top: 1}", "limits.top"),
-        ("limits: {max_speed_mps: 1e-9}", "limits.max_speed_mps"),  # no robot drives that slow, or 1e9 m/s fast
-        ("limits: {max_speed_mps: 1e9}", "limits.max_speed_mps"),
-        ("limits: {max_accel_mps2: 1e12}", "limits.max_accel_mps2"),
-        ("limits: {max_yaw_rate_rps: 0.001}", "limits.max_yaw_rate_rps"),
-    ):
-        (tmp_path / "bad.yaml").write_text(text.replace("limits: {max_speed_mps: 1.2, max_accel_mps2: 0.5}", bad))
+    limits = "limits: {max_speed_mps: 1.2, max_accel_mps2: 0.5}"
+    _refused_by_field(
+        tmp_path,
+        text.replace(limits, "{}"),
+        [
+            ("limits: {max_speed_mps: fast}", "limits.max_speed_mps"),
+            ("limits: {top: 1}", "limits.top"),
+            ("limits: {max_speed_mps: 1e-9}", "limits.max_speed_mps"),  # no robot drives that slow, or 1e9 m/s fast
+            ("limits: {max_speed_mps: 1e9}", "limits.max_speed_mps"),
+            ("limits: {max_accel_mps2: 1e12}", "limits.max_accel_mps2"),
+            ("limits: {max_yaw_rate_rps: 0.001}", "limits.max_yaw_rate_rps"),
+        ],
+    )
+
+
+def _refused_by_field(tmp_path, text: str, cases: list[tuple[str, str]]) -> None:
+    """A robot file ``text`` with each case's block in place of its "{}" is refused naming the case's field."""
+    from terrapref.errors import ConfigError
+
+    for bad, field in cases:
+        (tmp_path / "bad.yaml").write_text(text.replace("{}", bad))
         with pytest.raises(ConfigError) as raised:
             load_robot(tmp_path / "bad.yaml")
         assert raised.value.problems[0].field == field
@@ -316,7 +328,6 @@ def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup
 def test_the_robots_tilt_and_step_limits_come_from_its_file_then_its_parameters(tmp_path):
     """On relief the robot file's limits say what the robot crosses (they could not: the nodes
     always held the default vehicle's 25 deg, 30 deg and 0.15 m), and its node's parameters over them."""
-    from terrapref.errors import ConfigError
     from terrapref.groundmap.height import GeometryLimits
     from terrapref.interop.node_core import NodeOptions
 
@@ -332,16 +343,16 @@ def test_the_robots_tilt_and_step_limits_come_from_its_file_then_its_parameters(
     params = {"~max_step_m": 0.3, "~max_roll_deg": 22.0}
     applied = NodeOptions().resolved(lambda name, default: params.get(name, default)).applied_to(robot)
     assert (applied.limits.max_roll_deg, applied.limits.max_pitch_deg, applied.limits.max_step_m) == (22.0, 20.0, 0.3)
-    for bad, field in (
-        ("limits: {max_roll_deg: 90}", "limits.max_roll_deg"),
-        ("limits: {max_pitch_deg: .nan}", "limits.max_pitch_deg"),
-        ("limits: {max_step_m: 0.001}", "limits.max_step_m"),
-        ("limits: {max_step_m: tall}", "limits.max_step_m"),
-    ):
-        (tmp_path / "bad.yaml").write_text(text.replace("limits: {max_roll_deg: 15.0, max_pitch_deg: 20.0, max_step_m: 0.08}", bad))
-        with pytest.raises(ConfigError) as raised:
-            load_robot(tmp_path / "bad.yaml")
-        assert raised.value.problems[0].field == field
+    _refused_by_field(
+        tmp_path,
+        text.replace("limits: {max_roll_deg: 15.0, max_pitch_deg: 20.0, max_step_m: 0.08}", "{}"),
+        [
+            ("limits: {max_roll_deg: 90}", "limits.max_roll_deg"),
+            ("limits: {max_pitch_deg: .nan}", "limits.max_pitch_deg"),
+            ("limits: {max_step_m: 0.001}", "limits.max_step_m"),
+            ("limits: {max_step_m: tall}", "limits.max_step_m"),
+        ],
+    )
 
 
 def test_the_node_holds_a_fast_model_to_the_robots_limits_and_says_it_arrived(setup, tmp_path):

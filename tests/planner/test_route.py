@@ -132,17 +132,7 @@ def test_no_diagonal_step_slips_between_lethal_cells_that_meet_at_a_corner():
 def test_a_ledge_the_vehicle_cannot_climb_is_gone_round_and_one_it_can_is_crossed(tmp_path, height_m):
     # A sill 0.5 m thick across the path (x 20-20.5, y 0-14: the path at y 10, the way round from
     # y 14 up); the default vehicle climbs 0.15 m. The prior map's heights are known, as its classes are.
-    data = {
-        "format": "terrapref-scenario/1",
-        "name": "ledge",
-        "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
-        "terrain": [],
-        "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
-        "relief": [{"plateau": {"polygon": [[20.0, 0.0], [20.5, 0.0], [20.5, 14.0], [20.0, 14.0]], "height_m": height_m, "edge_m": 0.0}}],
-    }
-    config = ClassifierConfig(hidden=8, skip=True)
-    model = Model.load(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE)))
-    route = route_over(parse_scenario(data), model)
+    route = route_over(_sill(14.0, height_m), _driver_like(tmp_path))
     if height_m < 0.15:
         assert route.max_offset_m < 0.3  # straight over it
         return
@@ -155,15 +145,26 @@ def test_a_ledge_the_vehicle_cannot_climb_is_gone_round_and_one_it_can_is_crosse
 def test_a_ledge_across_the_whole_map_is_named_as_relief_not_as_lethal_terrain(tmp_path):
     """A course without lethal terrain whose ledge cuts the way: the error said only "lethal
     terrain", which the course has none of."""
-    data = {
-        "format": "terrapref-scenario/1",
-        "name": "wall",
-        "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
-        "terrain": [],
-        "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
-        "relief": [{"plateau": {"polygon": [[20.0, 0.0], [20.5, 0.0], [20.5, 20.0], [20.0, 20.0]], "height_m": 0.4, "edge_m": 0.0}}],
-    }
-    config = ClassifierConfig(hidden=8, skip=True)
-    model = Model.load(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE)))
     with pytest.raises(RouteError, match=r"ground past the vehicle's limits: a slope or a step it cannot cross\) cuts the path's start"):
-        route_over(parse_scenario(data), model)
+        route_over(_sill(20.0, 0.4), _driver_like(tmp_path))
+
+
+def _sill(y_top: float, height_m: float):
+    """A 40 x 20 m course along y = 10 m with a sill 0.5 m thick across it (x 20-20.5, y 0 to ``y_top``), a vertical step."""
+    sill = [[20.0, 0.0], [20.5, 0.0], [20.5, y_top], [20.0, y_top]]
+    return parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "ledge",
+            "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [],
+            "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+            "relief": [{"plateau": {"polygon": sill, "height_m": height_m, "edge_m": 0.0}}],
+        }
+    )
+
+
+def _driver_like(tmp_path):
+    """A model whose offset rule prices the classes as the default synthetic driver does."""
+    config = ClassifierConfig(hidden=8, skip=True)
+    return Model.load(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE)))

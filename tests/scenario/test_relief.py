@@ -149,15 +149,22 @@ def test_a_start_that_would_tip_the_vehicle_is_refused(height_m: float, refused:
     bank = {"plateau": {"polygon": [[0.0, 5.8], [20.0, 5.8], [20.0, 10.0], [0.0, 10.0]], "height_m": height_m, "edge_m": 1.6}}
     scenario = parse_scenario({**copy.deepcopy(FLAT), "relief": [bank]}, "bank.yaml")
     assert start_attitude(scenario) == pytest.approx(Simulation(scenario).reset().attitude, rel=1e-12, abs=1e-15)
+    _drivable_or_refused(
+        scenario,
+        refused,
+        "bank.yaml: start: (1, 5) stands the vehicle at roll 51.3 deg, pitch 0.0 deg, "
+        "past the vehicle's limits (25 deg of roll, 30 of pitch); start it on gentler ground",
+    )
+
+
+def _drivable_or_refused(scenario, refused: bool, line: str) -> None:
+    """``scenario`` taken as it is where it is not ``refused``, else refused in the one ``line``."""
     if not refused:
         assert drivable(scenario) is scenario
         return
     with pytest.raises(ScenarioError) as err:
         drivable(scenario)
-    assert err.value.lines() == [
-        "bank.yaml: start: (1, 5) stands the vehicle at roll 51.3 deg, pitch 0.0 deg, "
-        "past the vehicle's limits (25 deg of roll, 30 of pitch); start it on gentler ground"
-    ]
+    assert err.value.lines() == [line]
 
 
 @pytest.mark.parametrize(("height_m", "refused"), [(0.5, True), (0.14, False)])
@@ -172,16 +179,13 @@ def test_a_start_astride_a_step_higher_than_the_vehicle_climbs_is_refused(height
     for _ in range(30):  # 1 s at 1 m/s: the rear wheels reach the ledge
         sim.step((1.0, 0.0))
     assert (sim.stuck > 0) is refused
-    if not refused:
-        assert drivable(scenario) is scenario
-        return
-    with pytest.raises(ScenarioError) as err:
-        drivable(scenario)
-    assert err.value.lines() == [
+    _drivable_or_refused(
+        scenario,
+        refused,
         "ledge.yaml: start: (1, 5) stands the vehicle astride a step of 0.50 m (there, or begun a little to its side as "
         "an evaluation's later seeds may be), higher than it climbs (0.15 m): its rear wheels could not follow its front "
-        "ones; start it off the step"
-    ]
+        "ones; start it off the step",
+    )
 
 
 @pytest.mark.parametrize(("height_m", "refused"), [(0.6, True), (0.58, False)])

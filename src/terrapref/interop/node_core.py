@@ -174,9 +174,8 @@ class PlannerNodeCore:
         self.decided = 0  # frames decided on
         self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
         self.on_problem: Callable[[str], None] = lambda line: None  # told why a frame is skipped, where the log should say it
-        self._pending: list[
-            tuple[str, object, str, float]
-        ] = []  # images waiting for odometry or a depth image at their stamps, oldest first
+        # Images waiting for odometry or a depth image at their stamps, oldest first.
+        self._pending: list[tuple[str, object, str, float]] = []
         self._lut: np.ndarray | None = None  # the robot's label ids -> class ids, once the calibration has come
         self._undistort: np.ndarray | None = None  # a distorted lens's pinhole pixel -> its pixel (flat; -1 outside)
         self._lock = threading.RLock()  # ROS calls back from a thread per topic

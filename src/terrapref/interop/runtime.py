@@ -301,7 +301,7 @@ class PlannerRuntime:
             raise ValueError(
                 f"depth image of shape {image.shape} and dtype {image.dtype}; expected floats [m] of the label image's shape {self.shape}"
             )
-        median = millimetres_median(image)
+        median = None if self._with_depth else millimetres_median(image)  # a stream's unit, read from its first image taken
         if median is not None:
             raise ValueError(f"depth image of a median {median:g} m: millimetres as it seems; DepthFrame takes metres (REP 118)")
         attitude = _attitude(depth.attitude)

@@ -208,7 +208,11 @@ def start_attitude(scenario, config: VehicleConfig | None = None) -> Attitude:
 
 def start_attitudes(scenario, poses: tuple[Pose, ...], config: VehicleConfig | None = None) -> tuple[Attitude, ...]:
     """:func:`start_attitude` at each of ``poses`` (within :data:`START_SHIFT_M` of the start), in their order."""
-    contact = _start_contact(scenario, config)
+    return _attitudes_on(_start_contact(scenario, config), poses)
+
+
+def _attitudes_on(contact: GroundContact | None, poses: tuple[Pose, ...]) -> tuple[Attitude, ...]:
+    """The body's attitude at each of ``poses`` on ``contact``'s ground (None: level ground)."""
     return tuple(LEVEL for _ in poses) if contact is None else tuple(contact.attitude(pose) for pose in poses)
 
 
@@ -268,7 +272,7 @@ def drivable(scenario, config: VehicleConfig | None = None, seeds: int = 0):
             "rear wheels could not follow its front ones; start it off the step",
             field="start",
         )
-    attitudes = start_attitudes(scenario, poses, config)
+    attitudes = _attitudes_on(contact, poses)  # the ground round the start read once, for the step and the tilt
     tipped = [(pose, attitude) for pose, attitude in zip(poses, attitudes, strict=True) if GroundContact.past_limits(attitude, config)]
     if not tipped:
         return scenario
