@@ -405,33 +405,38 @@ DISC_SUMS = 6
 
 @njit(cache=True, nogil=True)
 def shape_geometry(
-    shape: tuple[np.ndarray, ...], least_weight: float, disc: np.ndarray, rows: np.ndarray, cols: np.ndarray, out: np.ndarray
+    shape: tuple[np.ndarray, ...],
+    reading: tuple[float, float],
+    disc: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    out: np.ndarray,
 ) -> None:
     """Slope [rad] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3: slope, NaN
     for the roughness, which heights give, step), from the ground's ``shape`` (:func:`depth_frame`)
-    as :func:`shape_to_check` last read it: a difference counts once its weight is at least
-    ``least_weight`` (its standard error at most 1 / sqrt of it). The slope is that of the
+    as :func:`shape_to_check` last read it: ``reading`` is the weight from which a difference
+    counts (its standard error at most 1 / sqrt of it) and the map's cell [m]. The slope is that of the
     gradient over the cells within a disc round the cell (``disc``: its sums, :func:`disc_sums`):
     along x, the rise of their differences along x over their run, and along y likewise; NaN
     where fewer than three differences are known along either. A step within the disc adds its
     height once to each row (or column) it crosses, however the returns fell about it, so it
     reads as the slope of its height over the disc, not as a wall. The step is the height range
     over the cell and its eight neighbours, their heights relative to it summed from the
-    differences between them (a corner by either way round, averaged where both are known); NaN
-    where fewer than two of the nine are known."""
+    differences between them (a corner by either way round, averaged where both are known), each
+    referred to a cell's run (:func:`_rise`); NaN where fewer than two of the nine are known."""
     n = disc.shape[0]
     h = np.empty((3, 3))
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
         if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
-            out[i, 0], out[i, 2] = _slope_and_step(shape, least_weight, disc, r0, c0, h)
+            out[i, 0], out[i, 2] = _slope_and_step(shape, reading, disc, r0, c0, h)
 
 
 @njit(cache=True, nogil=True)
 def block_cells(
     shape: tuple[np.ndarray, ...],
-    least_weight: float,
+    reading: tuple[float, float],
     disc: np.ndarray,
     cells: np.ndarray,
     limits: tuple[float, float],
@@ -449,7 +454,7 @@ def block_cells(
         r0, c0 = cells[i] // n, cells[i] % n
         lethal = False
         if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
-            slope, step = _slope_and_step(shape, least_weight, disc, r0, c0, h)
+            slope, step = _slope_and_step(shape, reading, disc, r0, c0, h)
             lethal = slope > max_slope or step > max_step
         if bool(blocked[r0, c0]) != lethal:
             blocked[r0, c0] = 1 if lethal else 0
@@ -459,12 +464,11 @@ def block_cells(
 
 @njit(cache=True, nogil=True, inline="always")
 def _slope_and_step(
-    shape: tuple[np.ndarray, ...], least_weight: float, disc: np.ndarray, r0: int, c0: int, h: np.ndarray
+    shape: tuple[np.ndarray, ...], reading: tuple[float, float], disc: np.ndarray, r0: int, c0: int, h: np.ndarray
 ) -> tuple[float, float]:
     """Cell (``r0``, ``c0``)'s slope [rad] and step [m] (:func:`shape_geometry`; ``h`` (3, 3): scratch)."""
-    dx, _, dxw, dy, _, dyw = shape
     gx, gy = _disc_gradient(disc, r0, c0)
-    return math.atan(math.hypot(gx, gy)), _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
+    return math.atan(math.hypot(gx, gy)), _step(shape, reading, r0, c0, h)
 
 
 @njit(cache=True, nogil=True)
@@ -544,20 +548,19 @@ def _move_in_discs(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least: float, r0: int, c0: int, h: np.ndarray) -> float:
+def _step(shape: tuple[np.ndarray, ...], reading: tuple[float, float], r0: int, c0: int, h: np.ndarray) -> float:
     """The height range over cell (``r0``, ``c0``) and its eight neighbours (``h`` (3, 3): scratch),
     from the differences between them (:func:`shape_geometry`); NaN where fewer than two are known."""
+    dx, dx_run, dxw, dy, dy_run, dyw = shape
+    least, cell = reading
+    along_x, along_y = (dx, dx_run, dxw), (dy, dy_run, dyw)
     h[:] = np.nan
     h[1, 1] = 0.0
     # Along the row and the column through the cell: h[1, 2] - h[1, 1] is the x difference at (r0, c0).
-    if wx[r0, c0] >= least:
-        h[1, 2] = gx[r0, c0]
-    if wx[r0, c0 - 1] >= least:
-        h[1, 0] = -gx[r0, c0 - 1]
-    if wy[r0, c0] >= least:
-        h[2, 1] = gy[r0, c0]
-    if wy[r0 - 1, c0] >= least:
-        h[0, 1] = -gy[r0 - 1, c0]
+    h[1, 2] = _rise(along_x, least, cell, r0, c0, 1)
+    h[1, 0] = -_rise(along_x, least, cell, r0, c0 - 1, 1)
+    h[2, 1] = _rise(along_y, least, cell, r0, c0, 0)
+    h[0, 1] = -_rise(along_y, least, cell, r0 - 1, c0, 0)
     # The corners: from their row's middle cell along x, and from their column's middle cell along y.
     for a in (0, 2):
         r = r0 + a - 1
@@ -565,12 +568,14 @@ def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least:
             c = c0 + b - 1
             total, ways = 0.0, 0
             cx = c0 if b == 2 else c0 - 1  # the x difference between the middle of row a and the corner
-            if not math.isnan(h[a, 1]) and wx[r, cx] >= least:
-                total += h[a, 1] + (gx[r, cx] if b == 2 else -gx[r, cx])
+            rise = _rise(along_x, least, cell, r, cx, 1)
+            if not (math.isnan(h[a, 1]) or math.isnan(rise)):
+                total += h[a, 1] + (rise if b == 2 else -rise)
                 ways += 1
             ry = r0 if a == 2 else r0 - 1  # the y difference between the middle of column b and the corner
-            if not math.isnan(h[1, b]) and wy[ry, c] >= least:
-                total += h[1, b] + (gy[ry, c] if a == 2 else -gy[ry, c])
+            rise = _rise(along_y, least, cell, ry, c, 0)
+            if not (math.isnan(h[1, b]) or math.isnan(rise)):
+                total += h[1, b] + (rise if a == 2 else -rise)
                 ways += 1
             if ways:
                 h[a, b] = total / ways
@@ -580,6 +585,38 @@ def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least:
             if not math.isnan(h[a, b]):
                 low, high, known = min(low, h[a, b]), max(high, h[a, b]), known + 1
     return high - low if known >= 2 else np.nan
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _rise(along: tuple[np.ndarray, np.ndarray, np.ndarray], least: float, cell: float, r: int, c: int, axis: int) -> float:
+    """The difference at (``r``, ``c``) along ``axis`` (1: x, 0: y; ``along``: its differences,
+    their runs and weights) referred to a cell's run: NaN where its weight is under ``least``.
+
+    A difference is the rise between two cells' mean returns, which lie anywhere in their cells:
+    on a slope, returns gathered at a far cell's near edge lengthen its run to up to twice a
+    cell, and its rise with it. So the rise is moved by the ground's grade times the run's
+    excess over ``cell``, the grade taken from it and its known neighbours along the axis: the
+    gentlest of them where all rise the same way, none otherwise, and none where it has no known
+    neighbour. On a plane every difference then reads as a cell's; at a ledge its neighbours are
+    level and its rise is kept whole."""
+    rise, run, weight = along
+    n = rise.shape[0]
+    if not (0 <= r < n and 0 <= c < n) or weight[r, c] < least:
+        return np.nan
+    here = np.float64(rise[r, c])
+    if not run[r, c] > 0.0:
+        return here
+    grade, known = here / np.float64(run[r, c]), 0
+    for k in (-1, 1):
+        rr, cc = r + k * (1 - axis), c + k * axis
+        if not (0 <= rr < n and 0 <= cc < n) or weight[rr, cc] < least or not run[rr, cc] > 0.0:
+            continue
+        theirs = np.float64(rise[rr, cc]) / np.float64(run[rr, cc])
+        if theirs * grade <= 0.0:
+            return here
+        grade = theirs if abs(theirs) < abs(grade) else grade
+        known += 1
+    return here + grade * (cell - np.float64(run[r, c])) if known else here
 
 
 @njit(cache=True, nogil=True)

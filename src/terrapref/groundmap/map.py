@@ -150,7 +150,7 @@ class GroundMap:
         their geometry no longer is (the ``blocked`` layer); the cells within the limits' reach
         of a blocked one read as the first lethal column (:meth:`_reblock`)."""
         blocked, limits = self._layers["blocked"], (self.limits.max_slope_rad, self.limits.max_step_m)
-        if height_kernels.block_cells(self._shape, self.height_settings.least_weight, self._disc, cells, limits, blocked):
+        if height_kernels.block_cells(self._shape, self._reading, self._disc, cells, limits, blocked):
             self._moved = True
         self._blocking = bool(blocked.any()) if self._moved else self._blocking
         self._reblock()
@@ -275,13 +275,18 @@ class GroundMap:
         """Slope [rad], NaN and step [m] (N, 3) of the cells (``rows``, ``cols``) from the ground's shape."""
         out = np.empty((len(rows), 3))
         rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-        height_kernels.shape_geometry(self._shape, self.height_settings.least_weight, self._disc, rows, cols, out)
+        height_kernels.shape_geometry(self._shape, self._reading, self._disc, rows, cols, out)
         return out
 
     @property
     def _checked(self) -> tuple[np.ndarray, ...]:
         """The differences and their runs as they were last read (terrapref.groundmap.height_compiled.shape_to_check)."""
         return tuple(self.layer(name) for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
+
+    @property
+    def _reading(self) -> tuple[float, float]:
+        """The weight from which a difference counts, and the cell [m] (height_compiled.shape_geometry)."""
+        return self.height_settings.least_weight, self.settings.map_resolution_m
 
     @property
     def _disc(self) -> np.ndarray:
