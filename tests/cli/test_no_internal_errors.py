@@ -160,3 +160,38 @@ def test_every_size_a_model_file_gives_is_bounded(tmp_path: Path, capsys, block,
     assert main(["evaluate", str(model), "fig7a_non_traversable_longer", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]) == 2
     one_line_error(capsys, "big.safetensors", *words)
     assert not (tmp_path / "ev").exists()
+
+
+@pytest.mark.parametrize("command", ["ros1", "ros2", "play"])
+def test_a_node_started_with_sigint_ignored_takes_ctrl_c_from_its_first_line(monkeypatch, command):
+    """A script's background job inherits SIGINT ignored. A node's command (and `play`) took
+    SIGINT only once it spun, so Ctrl-C in its first seconds (the model read, the middleware
+    started) was lost and it ran on; now it is armed before the command's first line, and put
+    back after it. Other commands keep what they inherit."""
+    import signal
+
+    from terrapref.cli import build_parser, robot
+
+    seen = {}
+
+    def command_body(args) -> int:
+        seen[args.command] = signal.getsignal(signal.SIGINT)
+        raise KeyboardInterrupt
+
+    for name in ("_cmd_ros1", "_cmd_ros2", "_cmd_play", "_cmd_route"):
+        monkeypatch.setattr(robot, name, command_body)
+    argv = {
+        "ros1": ["ros1", "--model", "m.safetensors", "--robot", "robot.yaml"],
+        "ros2": ["ros2", "--model", "m.safetensors", "--robot", "robot.yaml"],
+        "play": ["play", "log.mcap"],
+    }[command]
+    build_parser.cache_clear()  # built afresh with the stand-ins, and again after them
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        assert main(argv) == 130  # interrupted, not run on
+        assert seen[command] is signal.default_int_handler and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        main(["route", "s.yaml", "--model", "m.safetensors", "--out", "r.yaml"])
+        assert seen["route"] is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        build_parser.cache_clear()

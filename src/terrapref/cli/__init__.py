@@ -103,14 +103,28 @@ def _on_sigterm(pid: int) -> Callable[[int, object], None]:
     return handler
 
 
+# Commands a launcher or a supervisor ends with SIGINT, as it ends rclpy's and rospy's nodes:
+# started by a script in the background they inherit SIGINT ignored, so they arm it themselves,
+# from their first line (the model's loading and the middleware's start take seconds).
+ENDED_BY_SIGINT = ("ros1", "ros2", "play")
+
+
+def _arm_signals(command: str) -> dict[int, object]:
+    """SIGTERM ends the command as Ctrl-C does, cleaning up on the way; a node's command
+    (:data:`ENDED_BY_SIGINT`) takes SIGINT whatever it inherited. The handlers replaced."""
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _on_sigterm(os.getpid()))}
+    if command in ENDED_BY_SIGINT:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
+    return previous
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(train_flags=command == "train")
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
-    on_main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _on_sigterm(os.getpid())) if on_main_thread else None
+    previous = _arm_signals(args.command) if threading.current_thread() is threading.main_thread() else None
     try:
         return func(args)
     except UserError as exc:
@@ -139,5 +153,5 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: internal error ({type(exc).__name__}: {exc}); set TERRAPREF_DEBUG=1 for the traceback", file=sys.stderr)
         return 1
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in (previous or {}).items():
+            signal.signal(signum, handler)
