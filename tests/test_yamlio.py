@@ -27,6 +27,15 @@ def test_numbers_are_what_yaml_1_2_reads_as_numbers_and_nothing_else():
     assert load_yaml_text("a: .nan")["a"] != load_yaml_text("a: .nan")["a"]  # NaN
 
 
+def test_booleans_are_true_and_false_as_yaml_1_2_reads_them_and_yes_no_on_off_are_words():
+    """YAML 1.1 (PyYAML's) reads `on` as True: a class table naming a class `on` was refused
+    ("must be an identifier-like string") and a scenario's `class: on` read "got boolean True"."""
+    read = load_yaml_text("a: [true, True, TRUE, false, False, FALSE]\nb: [yes, no, on, off, y, n, Yes, OFF]\nc: ~\n")
+    assert read == {"a": [True, True, True, False, False, False], "b": ["yes", "no", "on", "off", "y", "n", "Yes", "OFF"], "c": None}
+    assert load_yaml_text(dump_yaml({"b": ["on", "yes", "no", "off"], "t": True})) == {"b": ["on", "yes", "no", "off"], "t": True}
+    assert "'on'" in dump_yaml({"class": "on"})  # quoted still, for the readers of YAML 1.1
+
+
 def test_a_string_that_reads_as_a_number_is_written_quoted_and_read_back_a_string():
     data = {"name": "1e5", "id": "12", "x": 0.05, "y": 1e-7, "z": 1e20, "w": "2.5e1", "v": ".5"}
     assert load_yaml_text(dump_yaml(data)) == data

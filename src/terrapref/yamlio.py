@@ -76,6 +76,15 @@ for _cls in (_UniqueKeyLoader, _Dumper):
     }
     _cls.add_implicit_resolver("tag:yaml.org,2002:int", _INT, list("-+0123456789"))
     _cls.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-+.0123456789"))
+# Booleans too: YAML 1.1 reads yes, no, on, off, y and n as booleans, so that a class named `on`
+# or a profile listing `no` would be refused as "a boolean"; YAML 1.2 reads them as the words they
+# are. The dumper still quotes them, for the readers of YAML 1.1.
+_BOOL = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
+_UniqueKeyLoader.yaml_implicit_resolvers = {
+    first: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in _UniqueKeyLoader.yaml_implicit_resolvers.items()
+}
+_UniqueKeyLoader.add_implicit_resolver("tag:yaml.org,2002:bool", _BOOL, list("tTfF"))
 _UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", _int)
 _UniqueKeyLoader.add_constructor("tag:yaml.org,2002:float", _float)
 

@@ -124,7 +124,8 @@ BAD_FILES: list[tuple[str, str | bytes, str]] = [
     ("unknown-rectangle", edit("yaw_deg: 30.0}", "yaw_deg: 30.0, pitch_deg: 1}"), "terrain[1].rectangle.pitch_deg: unknown key"),
     ("unknown-zone", edit('{id: "1",', '{id: "1", weight: 2,'), "zones[0].weight: unknown key"),
     ("string-number", edit("resolution_m: 0.1", "resolution_m: fine"), "world.resolution_m: expected a number, got string 'fine'"),
-    ("bool-number", edit("radius: 1.0", "radius: yes"), "terrain[0].circle.radius: expected a number, got boolean True"),
+    ("bool-number", edit("radius: 1.0", "radius: true"), "terrain[0].circle.radius: expected a number, got boolean True"),
+    ("yes-number", edit("radius: 1.0", "radius: yes"), "terrain[0].circle.radius: expected a number, got string 'yes'"),
     (
         "mapping-for-list",
         edit("size_m: [20.0, 10.0]", "size_m: {x: 20.0, y: 10.0}"),
