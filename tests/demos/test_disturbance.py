@@ -132,7 +132,8 @@ def test_a_driver_crawling_up_a_grade_through_pushes_still_reaches_the_goal(tmp_
     from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 
     setup = DriveSetup.of(resolve_scenario(str(TINY_RELIEF)))
-    config = ExpertConfig(relief=parse_relief_style("default,up_mps_per_deg=0.2")[1])  # the default style, as record's
+    # The default style, as record's, taking the mound's 14 deg (a push begins only clear of ground steeper than it takes).
+    config = ExpertConfig(relief=parse_relief_style("default,up_mps_per_deg=0.2,roll_deg=16,grade_deg=16")[1])
     pushes = RECIPES[DEFAULT_RECIPE].disturbance
     pushed = []
 
@@ -147,6 +148,52 @@ def test_a_driver_crawling_up_a_grade_through_pushes_still_reaches_the_goal(tmp_
     log = record_run(setup.simulation(), ExpertDriver(config), writer, RunSettings(setup.preference, pushes), np.random.default_rng(0))
     assert log.completed and log.tips == 0, log.summary()
     assert writer.recording().commands[:, 0].min() < 0.2 and any(pushed)
+
+
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
+def test_a_cautious_driver_is_not_pushed_onto_ground_steeper_than_it_takes(tmp_path: Path):
+    """A mound on the path, then a ridge 0.5 m beside it. The cautious style (7 deg of roll, 9 of
+    grade), pushed as `terrapref record` pushes, was pushed onto the ridge's flank: shedding its
+    speed to 0.1 m/s there, its steering fell under its hand's deadzone, and it crept along the
+    flank for 40 s at up to 19 deg, turned by each push (93 s for the 46 m). A push now begins only
+    clear of ground steeper than the driver takes, as of lethal terrain, and a driver slowed by
+    relief still steers."""
+    from terrapref.demos.expert import ExpertConfig
+    from terrapref.demos.recording import MemoryRecordingWriter
+    from terrapref.demos.relief_style import parse_relief_style
+    from terrapref.demos.session import DriveSetup
+    from terrapref.recipes import DEFAULT_RECIPE, RECIPES
+    from terrapref.scenario import parse_scenario
+
+    scenario = parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "mound_and_ridge",
+            "world": {"size_m": [50.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [],
+            "path": {"waypoints": [[2.0, 10.0], [48.0, 10.0]]},
+            "relief": [
+                {"mound": {"center": [12.0, 10.0], "radius": 3.0, "height_m": 0.8}},
+                {"ridge": {"polyline": [[20.0, 8.0], [30.0, 8.0]], "width_m": 3.0, "height_m": 0.6}},
+            ],
+        }
+    )
+    setup = DriveSetup.of(scenario)
+    config = ExpertConfig(relief=parse_relief_style("cautious")[1])
+    pushes = RECIPES[DEFAULT_RECIPE].disturbance
+    for seed in range(3):
+        writer = MemoryRecordingWriter(
+            tmp_path / f"mem{seed}",
+            setup.meta(ExpertInfo.of(seed, "default", config, pushes), PreferenceProfile.default()),
+            scenario.to_dict(),
+        )
+        run = record_run(
+            setup.simulation(), ExpertDriver(config), writer, RunSettings(setup.preference, pushes), np.random.default_rng(seed)
+        )
+        assert run.completed and run.tips == 0 and run.stuck == 0, run.summary()
+        summary = run.summary()
+        assert summary["max_roll_deg"] < 9.0 and summary["duration_s"] < 65.0, summary
+        assert writer.recording().commands[:, 0].min() > 0.3  # never crawling
 
 
 def test_push_rate_matches_rate_hz():

@@ -141,6 +141,36 @@ def test_on_a_ramp_it_asks_for_its_speed_less_what_the_grade_takes(waypoints: li
     assert np.abs(log.commands[level & (log.commands[:, 0] > 0.5), 0] - 1.0).max() < 1e-9
 
 
+def test_slowed_to_a_crawl_by_a_grade_it_still_turns_towards_its_line():
+    """Shedding 0.2 m/s a degree, the ramp's 9.5 deg slows it to 0.1 m/s. Heading 0.5 rad off the
+    path there, pure pursuit at 0.1 m/s asks for less than the hand's 0.06 rad/s deadzone, and the
+    stick stayed at zero: it crept off its line, turned by whatever pushed it. A person crawling
+    up a bank still turns the vehicle towards where they go."""
+    from terrapref.camera import SegmentationView
+    from terrapref.sim import Frame
+    from terrapref.vehicle import Pose
+
+    scenario = _scenario(RAMP, [[2.0, 10.0], [38.0, 10.0]])
+    driver = ExpertDriver(ExpertConfig(relief=parse_relief_style("default,up_mps_per_deg=0.2")[1]))
+    driver.reset(scenario, np.random.default_rng(0))
+    view = SegmentationView.of(np.zeros((4, 4), np.uint8))
+    w = driver.intent(Frame(0, 0.0, view, Pose(17.0, 10.0, 0.5), np.asarray(scenario.waypoints), 0.1))
+    assert driver.wanted_mps < 0.2 and w < -driver.config.deadzone_rps  # right, back towards the path
+
+
+def test_it_keeps_clear_of_ground_steeper_than_it_takes_as_of_lethal_terrain():
+    """What a push keeps clear of (terrapref.demos.disturbance): the bank's 16 deg flank, for a
+    driver that takes 12 deg, from within the clearance of it, and not from farther; for the bold
+    driver (20 deg) and one without a relief style, only lethal terrain, of which there is none."""
+    scenario = _scenario(BANK, ALONG_BANK)
+    drivers = {name: ExpertDriver(ExpertConfig(relief=parse_relief_style(name)[1])) for name in ("default", "bold")}
+    drivers["flat"] = ExpertDriver(ExpertConfig())
+    for driver in drivers.values():
+        driver.reset(scenario, np.random.default_rng(0))
+    assert drivers["default"].keeps_clear_within(20.0, 10.25, 3.0) and not drivers["default"].keeps_clear_within(20.0, 5.0, 3.0)
+    assert not drivers["bold"].keeps_clear_within(20.0, 10.25, 3.0) and not drivers["flat"].keeps_clear_within(20.0, 10.25, 3.0)
+
+
 @pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_record_stores_the_relief_style_and_refuses_a_bad_one(tmp_path, capsys):
     course, out = tmp_path / "bank.yaml", tmp_path / "rec"

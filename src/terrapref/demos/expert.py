@@ -413,6 +413,14 @@ class ExpertDriver:
         """
         return _offset_classes(centre, normal, lat, upto, self.world.raster, self.world.resolution_m)
 
+    def keeps_clear_within(self, x: float, y: float, radius_m: float) -> bool:
+        """Whether what the driver keeps clear of lies within ``radius_m`` of (``x``, ``y``) [m]:
+        lethal terrain, and with a relief style ground steeper than it takes. Its hand does not
+        lapse there (terrapref.demos.disturbance: a push begins only farther from it)."""
+        if self.world.lethal_within(x, y, radius_m):
+            return True
+        return self._sight is not None and self._sight.steep_within(x, y, radius_m, self.config.relief)
+
     def pursuit(self, pose: tuple[float, float, float], s_now: float, offset: float) -> tuple[float, float]:
         """Pure pursuit toward the path shifted sideways by ``offset``: the sine of the target's
         bearing from the heading and its distance [m] (curvature 2 sin / distance)."""
@@ -473,7 +481,8 @@ class ExpertDriver:
 
     def intent(self, frame: Frame) -> float:
         """The yaw rate [rad/s] the driver wants now, before its hand's delay, rate limit and tremor,
-        at the faster of the vehicle's speed and the speed it wants (``wanted_mps`` after the call).
+        at the faster of the vehicle's speed and the speed it wants (``wanted_mps`` after the call);
+        with a relief style, at no less than :data:`RELIEF_STEER_MPS`.
 
         Used alone when the driver corrects another driver (the planner) rather than driving.
         """
@@ -482,7 +491,10 @@ class ExpertDriver:
         self.offset = self.choose_offset(s_now, frame.pose, max(frame.speed_mps, self.wanted_mps))
         sin_alpha, distance = self.pursuit(frame.pose, s_now, self.offset)
         self.wanted_mps = self.wanted_speed(frame.pose, s_now, 2.0 * sin_alpha / distance)
-        w = pure_pursuit_yaw_rate(max(frame.speed_mps, self.wanted_mps), sin_alpha, distance)
+        v = max(frame.speed_mps, self.wanted_mps)
+        if self._sight is not None:  # slowed by relief, it still turns to where it is going
+            v = max(v, RELIEF_STEER_MPS)
+        w = pure_pursuit_yaw_rate(v, sin_alpha, distance)
         w = 0.0 if abs(w) < c.deadzone_rps else w
         return float(np.clip(w, -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
 
@@ -503,6 +515,14 @@ class ExpertDriver:
         if out != 0.0 and c.stick_noise_rps > 0:
             out = float(np.clip(out + self.rng.normal(0.0, c.stick_noise_rps), -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
         return Command(v, out)
+
+
+# A driver slowed by relief (a steep grade sheds its speed down to MIN_CRUISE_MPS) steers as at
+# this speed at least. Pure pursuit's yaw rate is the speed times the curvature: at 0.1 m/s a
+# target half a radian off asks for less than the hand's deadzone, so a cautious driver on a ridge's
+# flank held its stick at zero and crept along the flank, turned by each push, where a person
+# crawling up a bank still turns the vehicle towards where they are going.
+RELIEF_STEER_MPS = 0.3
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -105,6 +105,8 @@ class RecordLoop:
         control: the control set whose indices label the frames.
         disturb: the run's pushes, or None for none.
         perceiver: what the robot receives instead of the truth, already reset; None: the truth.
+        keeps_clear_within: ``(x, y, r)``: whether what the driver keeps clear of lies within
+            ``r`` [m] of (x, y), where a push does not begin (default: lethal terrain).
     """
 
     def __init__(
@@ -114,8 +116,10 @@ class RecordLoop:
         control: ControlSet,
         disturb: Disturber | None = None,
         perceiver: Perceiver | None = None,
+        keeps_clear_within: Callable[[float, float, float], bool] | None = None,
     ) -> None:
         self.sim, self.writer, self.control, self.disturb, self.perceiver = sim, writer, control, disturb, perceiver
+        self.keeps_clear_within = keeps_clear_within or sim.world.lethal_within
         self._perceived: tuple[int, Frame | None] | None = None  # (the period, what reached the robot in it)
 
     def executed(self, command: Command) -> Command:
@@ -123,7 +127,7 @@ class RecordLoop:
         if self.disturb is None:
             return command
         x, y, _ = self.sim.vehicle.pose
-        return self.disturb(command, self.sim.vehicle.speed_mps, lambda r: self.sim.world.lethal_within(x, y, r))
+        return self.disturb(command, self.sim.vehicle.speed_mps, lambda r: self.keeps_clear_within(x, y, r))
 
     def perceive(self, frame: Frame) -> Frame | None:
         """What reaches the robot in ``frame``'s period (``frame`` itself without a perceiver; None
@@ -186,7 +190,8 @@ def record_run(
     frame = sim.reset()
     driver.reset(sim.scenario, rng)
     disturber = _run_disturber(settings.disturbance, rng, sim)
-    loop = RecordLoop(sim, writer, settings.preference.control, disturber, run_perceiver(settings.perception, sim, rng))
+    perceiver = run_perceiver(settings.perception, sim, rng)
+    loop = RecordLoop(sim, writer, settings.preference.control, disturber, perceiver, getattr(driver, "keeps_clear_within", None))
     while not sim.done:
         command = driver.act(frame)
         frame = loop.record_step(frame, command, loop.executed(command))
