@@ -132,8 +132,7 @@ def test_a_driver_crawling_up_a_grade_through_pushes_still_reaches_the_goal(tmp_
     from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 
     setup = DriveSetup.of(resolve_scenario(str(TINY_RELIEF)))
-    # The default style, as record's, taking the mound's 14 deg (a push begins only clear of ground steeper than it takes).
-    config = ExpertConfig(relief=parse_relief_style("default,up_mps_per_deg=0.2,roll_deg=16,grade_deg=16")[1])
+    config = ExpertConfig(relief=parse_relief_style("default,up_mps_per_deg=0.2")[1])  # the default style, as record's
     pushes = RECIPES[DEFAULT_RECIPE].disturbance
     pushed = []
 
@@ -151,13 +150,13 @@ def test_a_driver_crawling_up_a_grade_through_pushes_still_reaches_the_goal(tmp_
 
 
 @pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
-def test_a_cautious_driver_is_not_pushed_onto_ground_steeper_than_it_takes(tmp_path: Path):
-    """A mound on the path, then a ridge 0.5 m beside it. The cautious style (7 deg of roll, 9 of
-    grade), pushed as `terrapref record` pushes, was pushed onto the ridge's flank: shedding its
-    speed to 0.1 m/s there, its steering fell under its hand's deadzone, and it crept along the
-    flank for 40 s at up to 19 deg, turned by each push (93 s for the 46 m). A push now begins only
-    clear of ground steeper than the driver takes, as of lethal terrain, and a driver slowed by
-    relief still steers."""
+def test_a_cautious_driver_is_not_pushed_onto_ground_that_could_tip_the_vehicle(tmp_path: Path):
+    """A mound on the path, then a ridge 0.5 m beside it whose flanks would roll the vehicle past
+    its 25 deg. The cautious style (7 deg of roll, 9 of grade), pushed as `terrapref record`
+    pushes, was pushed onto the ridge's flank: shedding its speed to 0.1 m/s there, its steering
+    fell under its hand's deadzone, and it crept along the flank for 40 s at up to 19 deg, turned
+    by each push (93 s for the 46 m). A push now begins only clear of ground that would tilt the
+    vehicle past its limits, as of lethal terrain, and a driver slowed by relief still steers."""
     from terrapref.demos.expert import ExpertConfig
     from terrapref.demos.recording import MemoryRecordingWriter
     from terrapref.demos.relief_style import parse_relief_style

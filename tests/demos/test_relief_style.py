@@ -20,6 +20,7 @@ from terrapref.demos.relief_style import RELIEF_STYLES, ReliefStyle, parse_relie
 from terrapref.errors import UserError
 from terrapref.scenario import Scenario, parse_scenario
 from terrapref.sim import EpisodeLog, Simulation, run_episode
+from terrapref.vehicle import VehicleConfig
 
 
 def _scenario(relief: list[dict], waypoints: list[list[float]]) -> Scenario:
@@ -158,17 +159,20 @@ def test_slowed_to_a_crawl_by_a_grade_it_still_turns_towards_its_line():
     assert driver.wanted_mps < 0.2 and w < -driver.config.deadzone_rps  # right, back towards the path
 
 
-def test_it_keeps_clear_of_ground_steeper_than_it_takes_as_of_lethal_terrain():
-    """What a push keeps clear of (terrapref.demos.disturbance): the bank's 16 deg flank, for a
-    driver that takes 12 deg, from within the clearance of it, and not from farther; for the bold
-    driver (20 deg) and one without a relief style, only lethal terrain, of which there is none."""
-    scenario = _scenario(BANK, ALONG_BANK)
-    drivers = {name: ExpertDriver(ExpertConfig(relief=parse_relief_style(name)[1])) for name in ("default", "bold")}
-    drivers["flat"] = ExpertDriver(ExpertConfig())
-    for driver in drivers.values():
-        driver.reset(scenario, np.random.default_rng(0))
-    assert drivers["default"].keeps_clear_within(20.0, 10.25, 3.0) and not drivers["default"].keeps_clear_within(20.0, 5.0, 3.0)
-    assert not drivers["bold"].keeps_clear_within(20.0, 10.25, 3.0) and not drivers["flat"].keeps_clear_within(20.0, 10.25, 3.0)
+def test_a_push_begins_only_clear_of_ground_that_would_tilt_the_vehicle_past_its_limits():
+    """What a push keeps clear of besides lethal terrain (terrapref.demos.disturbance): the flank of
+    a bank 1 m high over 1.5 m (34 deg) is past the vehicle's 25 deg of roll from within the
+    clearance of it and not from farther; the bank over 3.5 m (16 deg) is within the limits, and a
+    flat world has nothing steep."""
+    from terrapref.world import rasterise
+
+    steep = [{"plateau": {"polygon": [[14.0, 12.0], [26.0, 12.0], [26.0, 30.0], [14.0, 30.0]], "height_m": 1.0, "edge_m": 1.5}}]
+    limit = VehicleConfig().max_roll_deg
+    world = rasterise(_scenario(steep, ALONG_BANK))
+    assert world.steep_within(20.0, 10.25, 3.0, limit, 0.6) and not world.steep_within(20.0, 6.0, 3.0, limit, 0.6)
+    gentle = rasterise(_scenario(BANK, ALONG_BANK))
+    assert not gentle.steep_within(20.0, 10.25, 3.0, limit, 0.6) and gentle.steep_within(20.0, 10.25, 3.0, 12.0, 0.6)
+    assert not rasterise(_scenario([], ALONG_BANK)).steep_within(20.0, 10.25, 3.0, 1.0, 0.6)
 
 
 @pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time

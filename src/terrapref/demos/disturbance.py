@@ -39,9 +39,9 @@ class DisturbanceConfig:
             a coin toss.
         min_duration_s, max_duration_s: how long a push lasts [s].
         max_command_rps: the vehicle's yaw-rate limit; the pushed command is clipped to it.
-        clear_m, clear_s: a push begins only where nothing the driver keeps clear of (lethal
-            terrain; for a driver with a relief style, ground steeper than it takes too) lies
-            within ``clear_m + clear_s * speed`` of the vehicle's centre [m, s]; both 0: anywhere. A push that
+        clear_m, clear_s: a push begins only where no lethal terrain, nor ground that would tilt
+            the vehicle past its roll or pitch limit, lies within ``clear_m + clear_s * speed`` of
+            the vehicle's centre [m, s]; both 0: anywhere. A push that
             would begin nearer is left out (its time passes without a push, so that the pushes
             after it are drawn as they would have been).
     """

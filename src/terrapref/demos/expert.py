@@ -413,14 +413,6 @@ class ExpertDriver:
         """
         return _offset_classes(centre, normal, lat, upto, self.world.raster, self.world.resolution_m)
 
-    def keeps_clear_within(self, x: float, y: float, radius_m: float) -> bool:
-        """Whether what the driver keeps clear of lies within ``radius_m`` of (``x``, ``y``) [m]:
-        lethal terrain, and with a relief style ground steeper than it takes. Its hand does not
-        lapse there (terrapref.demos.disturbance: a push begins only farther from it)."""
-        if self.world.lethal_within(x, y, radius_m):
-            return True
-        return self._sight is not None and self._sight.steep_within(x, y, radius_m, self.config.relief)
-
     def pursuit(self, pose: tuple[float, float, float], s_now: float, offset: float) -> tuple[float, float]:
         """Pure pursuit toward the path shifted sideways by ``offset``: the sine of the target's
         bearing from the heading and its distance [m] (curvature 2 sin / distance)."""

@@ -196,24 +196,6 @@ class ReliefSight:
         limits = (math.tan(math.radians(style.roll_deg)), math.tan(math.radians(style.grade_deg)))
         return _steep(centre, normal, np.asarray(offsets, dtype=np.float64), upto, self.heights, 1.0 / self.res, self.body, limits)
 
-    def steep_within(self, x: float, y: float, radius_m: float, style: ReliefStyle) -> bool:
-        """Whether ground steeper than ``style`` takes lies within ``radius_m`` of (``x``, ``y``) [m]:
-        a cell whose slope, read across the body's track, is past the smaller of its roll and its
-        grade (past what it takes facing some way)."""
-        res, a = self.res, max(1, round(self.body[0] / self.res))  # half the track, in cells
-        ny, nx = self.heights.shape
-        r0, c0 = max(math.floor((y - radius_m) / res) - a, 0), max(math.floor((x - radius_m) / res) - a, 0)
-        r1, c1 = min(math.floor((y + radius_m) / res) + a + 1, ny), min(math.floor((x + radius_m) / res) + a + 1, nx)
-        h = self.heights[r0:r1, c0:c1].astype(np.float64)
-        if h.shape[0] <= 2 * a or h.shape[1] <= 2 * a:
-            return False
-        gx = (h[a:-a, 2 * a :] - h[a:-a, : -2 * a]) / (2 * a * res)
-        gy = (h[2 * a :, a:-a] - h[: -2 * a, a:-a]) / (2 * a * res)
-        rows, cols = np.arange(r0 + a, r1 - a), np.arange(c0 + a, c1 - a)
-        near = ((rows[:, None] + 0.5) * res - y) ** 2 + ((cols[None, :] + 0.5) * res - x) ** 2 <= radius_m**2
-        steepest = math.tan(math.radians(min(style.roll_deg, style.grade_deg)))
-        return bool((near & (gx * gx + gy * gy > steepest * steepest)).any())
-
     def along(self, xy: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The body's pitch [rad, positive nose up] heading ``heading`` (N,) [rad] at the points
         ``xy`` (N, 2), and the roughness [m] there; smooth off the map."""

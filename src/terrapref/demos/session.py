@@ -105,8 +105,6 @@ class RecordLoop:
         control: the control set whose indices label the frames.
         disturb: the run's pushes, or None for none.
         perceiver: what the robot receives instead of the truth, already reset; None: the truth.
-        keeps_clear_within: ``(x, y, r)``: whether what the driver keeps clear of lies within
-            ``r`` [m] of (x, y), where a push does not begin (default: lethal terrain).
     """
 
     def __init__(
@@ -116,10 +114,8 @@ class RecordLoop:
         control: ControlSet,
         disturb: Disturber | None = None,
         perceiver: Perceiver | None = None,
-        keeps_clear_within: Callable[[float, float, float], bool] | None = None,
     ) -> None:
         self.sim, self.writer, self.control, self.disturb, self.perceiver = sim, writer, control, disturb, perceiver
-        self.keeps_clear_within = keeps_clear_within or sim.world.lethal_within
         self._perceived: tuple[int, Frame | None] | None = None  # (the period, what reached the robot in it)
 
     def executed(self, command: Command) -> Command:
@@ -127,7 +123,15 @@ class RecordLoop:
         if self.disturb is None:
             return command
         x, y, _ = self.sim.vehicle.pose
-        return self.disturb(command, self.sim.vehicle.speed_mps, lambda r: self.keeps_clear_within(x, y, r))
+        return self.disturb(command, self.sim.vehicle.speed_mps, lambda r: self._hazard_within(x, y, r))
+
+    def _hazard_within(self, x: float, y: float, radius_m: float) -> bool:
+        """Whether lethal terrain, or ground that would tilt the vehicle past its roll or pitch
+        limit, lies within ``radius_m`` of (``x``, ``y``) [m]: a push begins only clear of both."""
+        world, vehicle = self.sim.world, self.sim.vehicle.config
+        if world.lethal_within(x, y, radius_m):
+            return True
+        return world.steep_within(x, y, radius_m, min(vehicle.max_roll_deg, vehicle.max_pitch_deg), vehicle.half_width_m)
 
     def perceive(self, frame: Frame) -> Frame | None:
         """What reaches the robot in ``frame``'s period (``frame`` itself without a perceiver; None
@@ -190,8 +194,7 @@ def record_run(
     frame = sim.reset()
     driver.reset(sim.scenario, rng)
     disturber = _run_disturber(settings.disturbance, rng, sim)
-    perceiver = run_perceiver(settings.perception, sim, rng)
-    loop = RecordLoop(sim, writer, settings.preference.control, disturber, perceiver, getattr(driver, "keeps_clear_within", None))
+    loop = RecordLoop(sim, writer, settings.preference.control, disturber, run_perceiver(settings.perception, sim, rng))
     while not sim.done:
         command = driver.act(frame)
         frame = loop.record_step(frame, command, loop.executed(command))

@@ -114,6 +114,27 @@ class WorldMap:
         near = ((rows[:, None] + 0.5) * res - y) ** 2 + ((cols[None, :] + 0.5) * res - x) ** 2 <= radius_m**2
         return bool((self._lethal[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1] & near).any())
 
+    def steep_within(self, x: float, y: float, radius_m: float, max_slope_deg: float, across_m: float) -> bool:
+        """Whether a cell centre within ``radius_m`` of the point ``(x, y)`` [m] lies on ground
+        steeper than ``max_slope_deg``, its slope read from the heights ``across_m`` either side of
+        it (a body's half track: the tilt a vehicle there would take, not a bump under one wheel);
+        never on a flat world."""
+        if self.height is None:
+            return False
+        res, a = self.resolution_m, max(1, round(across_m / self.resolution_m))
+        ny, nx = self.height.shape
+        r0, c0 = max(math.floor((y - radius_m) / res) - a, 0), max(math.floor((x - radius_m) / res) - a, 0)
+        r1, c1 = min(math.floor((y + radius_m) / res) + a + 1, ny), min(math.floor((x + radius_m) / res) + a + 1, nx)
+        h = self.height[r0:r1, c0:c1].astype(np.float64)
+        if h.shape[0] <= 2 * a or h.shape[1] <= 2 * a:
+            return False
+        gx = (h[a:-a, 2 * a :] - h[a:-a, : -2 * a]) / (2 * a * res)
+        gy = (h[2 * a :, a:-a] - h[: -2 * a, a:-a]) / (2 * a * res)
+        rows, cols = np.arange(r0 + a, r1 - a), np.arange(c0 + a, c1 - a)
+        near = ((rows[:, None] + 0.5) * res - y) ** 2 + ((cols[None, :] + 0.5) * res - x) ** 2 <= radius_m**2
+        steepest = math.tan(math.radians(max_slope_deg))
+        return bool((near & (gx * gx + gy * gy > steepest * steepest)).any())
+
     @functools.cached_property
     def _lethal(self) -> np.ndarray:
         """Which cells are lethal (ny, nx), made on first use."""
