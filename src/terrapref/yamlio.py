@@ -69,22 +69,21 @@ def _float(loader: yaml.BaseLoader, node: yaml.ScalarNode) -> float:
     return math.nan if text == ".nan" else float(text)
 
 
-for _cls in (_UniqueKeyLoader, _Dumper):
-    _cls.yaml_implicit_resolvers = {
-        first: [(tag, rx) for tag, rx in resolvers if tag not in ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")]
-        for first, resolvers in _cls.yaml_implicit_resolvers.items()
-    }
-    _cls.add_implicit_resolver("tag:yaml.org,2002:int", _INT, list("-+0123456789"))
-    _cls.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-+.0123456789"))
-# Booleans too: YAML 1.1 reads yes, no, on, off, y and n as booleans, so that a class named `on`
-# or a profile listing `no` would be refused as "a boolean"; YAML 1.2 reads them as the words they
-# are. The dumper still quotes them, for the readers of YAML 1.1.
+# Booleans too, for the loader: YAML 1.1 reads yes, no, on, off, y and n as booleans, so that a
+# class named `on` or a profile listing `no` would be refused as "a boolean"; YAML 1.2 reads them
+# as the words they are. The dumper still quotes them, for the readers of YAML 1.1.
 _BOOL = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
-_UniqueKeyLoader.yaml_implicit_resolvers = {
-    first: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:bool"]
-    for first, resolvers in _UniqueKeyLoader.yaml_implicit_resolvers.items()
+_READ_AS_1_2 = {
+    "tag:yaml.org,2002:int": (_INT, "-+0123456789"),
+    "tag:yaml.org,2002:float": (_FLOAT, "-+.0123456789"),
+    "tag:yaml.org,2002:bool": (_BOOL, "tTfF"),
 }
-_UniqueKeyLoader.add_implicit_resolver("tag:yaml.org,2002:bool", _BOOL, list("tTfF"))
+for _cls, _tags in ((_UniqueKeyLoader, tuple(_READ_AS_1_2)), (_Dumper, ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float"))):
+    _cls.yaml_implicit_resolvers = {
+        first: [(tag, rx) for tag, rx in resolvers if tag not in _tags] for first, resolvers in _cls.yaml_implicit_resolvers.items()
+    }
+    for _tag in _tags:
+        _cls.add_implicit_resolver(_tag, _READ_AS_1_2[_tag][0], list(_READ_AS_1_2[_tag][1]))
 _UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", _int)
 _UniqueKeyLoader.add_constructor("tag:yaml.org,2002:float", _float)
 

@@ -105,14 +105,10 @@ class WorldMap:
     def lethal_within(self, x: float, y: float, radius_m: float) -> bool:
         """Whether the centre of a lethal cell lies within ``radius_m`` of the point ``(x, y)`` [m]
         (the map's edge is not lethal)."""
-        res = self.resolution_m
-        ny, nx = self.raster.shape
-        rows = np.arange(max(math.floor((y - radius_m) / res), 0), min(math.floor((y + radius_m) / res) + 1, ny))
-        cols = np.arange(max(math.floor((x - radius_m) / res), 0), min(math.floor((x + radius_m) / res) + 1, nx))
-        if not (len(rows) and len(cols)):
+        r0, r1, c0, c1 = self._window(x, y, radius_m, 0)
+        if r1 <= r0 or c1 <= c0:
             return False
-        near = ((rows[:, None] + 0.5) * res - y) ** 2 + ((cols[None, :] + 0.5) * res - x) ** 2 <= radius_m**2
-        return bool((self._lethal[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1] & near).any())
+        return bool((self._lethal[r0:r1, c0:c1] & self._disc(x, y, radius_m, (r0, r1, c0, c1))).any())
 
     def steep_within(self, x: float, y: float, radius_m: float, max_slope_deg: float, across_m: float) -> bool:
         """Whether a cell centre within ``radius_m`` of the point ``(x, y)`` [m] lies on ground
@@ -122,18 +118,31 @@ class WorldMap:
         if self.height is None:
             return False
         res, a = self.resolution_m, max(1, round(across_m / self.resolution_m))
-        ny, nx = self.height.shape
-        r0, c0 = max(math.floor((y - radius_m) / res) - a, 0), max(math.floor((x - radius_m) / res) - a, 0)
-        r1, c1 = min(math.floor((y + radius_m) / res) + a + 1, ny), min(math.floor((x + radius_m) / res) + a + 1, nx)
+        r0, r1, c0, c1 = self._window(x, y, radius_m, a)
         h = self.height[r0:r1, c0:c1].astype(np.float64)
         if h.shape[0] <= 2 * a or h.shape[1] <= 2 * a:
             return False
         gx = (h[a:-a, 2 * a :] - h[a:-a, : -2 * a]) / (2 * a * res)
         gy = (h[2 * a :, a:-a] - h[: -2 * a, a:-a]) / (2 * a * res)
-        rows, cols = np.arange(r0 + a, r1 - a), np.arange(c0 + a, c1 - a)
-        near = ((rows[:, None] + 0.5) * res - y) ** 2 + ((cols[None, :] + 0.5) * res - x) ** 2 <= radius_m**2
+        near = self._disc(x, y, radius_m, (r0 + a, r1 - a, c0 + a, c1 - a))
         steepest = math.tan(math.radians(max_slope_deg))
         return bool((near & (gx * gx + gy * gy > steepest * steepest)).any())
+
+    def _window(self, x: float, y: float, radius_m: float, pad: int) -> tuple[int, int, int, int]:
+        """The rows and columns (first, past the last) of the cells within ``radius_m`` of (``x``,
+        ``y``) [m] along each axis, ``pad`` cells more either side, clipped to the map."""
+        res = self.resolution_m
+        ny, nx = self.raster.shape
+        rows = max(math.floor((y - radius_m) / res) - pad, 0), min(math.floor((y + radius_m) / res) + pad + 1, ny)
+        cols = max(math.floor((x - radius_m) / res) - pad, 0), min(math.floor((x + radius_m) / res) + pad + 1, nx)
+        return (*rows, *cols)
+
+    def _disc(self, x: float, y: float, radius_m: float, window: tuple[int, int, int, int]) -> np.ndarray:
+        """Which cells of ``window`` (:meth:`_window`) have their centre within ``radius_m`` of (``x``, ``y``)."""
+        r0, r1, c0, c1 = window
+        res = self.resolution_m
+        rows, cols = np.arange(r0, r1), np.arange(c0, c1)
+        return ((rows[:, None] + 0.5) * res - y) ** 2 + ((cols[None, :] + 0.5) * res - x) ** 2 <= radius_m**2
 
     @functools.cached_property
     def _lethal(self) -> np.ndarray:
