@@ -9,6 +9,7 @@ from test_offset_rule import DRIVER_LIKE, _offset_meta, _scenario, _seen_from, _
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.features import FeatureConfig
+from terrapref.groundmap import height_compiled as kernels
 from terrapref.groundmap.costmap import LETHAL_COST, UNKNOWN_COST, class_costs, with_layers
 from terrapref.groundmap.map import GroundMap
 from terrapref.interop.runtime import PlannerRuntime
@@ -80,8 +81,9 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     elevation[...] = (0.2 * res * cols).astype(np.float32)  # a ramp up along x of grade 0.2
     gmap.layer("returns")[...] = 3  # each cell's returns agreeing
     gmap.layer("weight")[...] = 3 / 0.01**2  # ... each known to 1 cm
-    for axis, rise in (("x", 0.2 * res), ("y", 0.0)):  # and the differences between neighbours the frames showed
-        gmap.layer(f"d{axis}")[...], gmap.layer(f"d{axis}_run")[...], gmap.layer(f"d{axis}_weight")[...] = rise * 1e4, res * 1e4, 1e4
+    shape = gmap.layer("shape")
+    for first, rise in ((kernels.SHAPE_X, 0.2 * res), (kernels.SHAPE_Y, 0.0)):  # and the differences between neighbours the frames showed
+        shape[..., first + kernels.RISE], shape[..., first + kernels.RUN], shape[..., first + kernels.WEIGHT] = rise, res, 1e4
     gmap.read_shape()
     gmap.layer("rough")[...], gmap.layer("rough_weight")[...] = 0.02**2, 1.0  # the frames read 2 cm of roughness ...
     gmap.layer("rough_weight")[:, :5] = 0.0  # ... save in the first five columns

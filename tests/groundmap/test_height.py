@@ -193,8 +193,12 @@ def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, r
     run = np.full(elevation.shape, run_m, dtype=np.float32)
     disc = np.empty((*elevation.shape, kernels.DISC_SUMS), np.float32)  # as the map keeps its sums
     kernels.disc_sums((dx, run, dy, run), 3, np.arange(elevation.size), disc)  # every difference read
+    shape = np.empty((*elevation.shape, kernels.SHAPE_VALUES), np.float32)  # as the map's shape layer holds them
+    for first, values in ((kernels.SHAPE_X, (dx, run, known_x)), (kernels.SHAPE_Y, (dy, run, known_y))):
+        for k, value in zip((kernels.RISE, kernels.RUN, kernels.WEIGHT), values, strict=True):
+            shape[..., first + k] = value
     out = np.empty((len(rows), 3))
-    kernels.shape_geometry((dx, run, known_x, dy, run, known_y), (1.0 / 0.03**2, res), disc, rows, cols, out)
+    kernels.shape_geometry(shape, (1.0 / 0.03**2, res), disc, rows, cols, out)
     return out
 
 
@@ -243,7 +247,7 @@ def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -
         np.full((n, n), np.nan, np.float32), np.zeros((n, n), np.uint32), np.zeros((n, n), np.float32), np.zeros((n, n), np.float32)
     )
     slot, sums = np.full(n * n, -1, np.int32), np.empty((1, kernels.FRAME_SUMS))
-    shape = tuple(np.zeros((n, n), np.float32) for _ in range(6))
+    shape = np.zeros((n, n, kernels.SHAPE_VALUES), np.float32)
 
     def vote(x: float, y: float, z: float, across_m: float) -> None:
         """One frame of one return at (x, y, z) seen from ``across_m`` behind it, 0.8 m up (a camera

@@ -18,7 +18,7 @@ in different frames (at the edge of the view, behind a mound, as the vehicle tur
 heights that disagree by as much, and a step or a slope read across them is a ghost. Within one
 frame there is none: so each frame's returns give each cell its gradient (the plane through its
 own mean return and its two neighbours' along x and y), and the gradients, weighed by their
-variance, are fused over frames (the ``dx`` and ``dy`` layers). Where a frame moves a cell's
+variance, are fused over frames (the ``shape`` layer). Where a frame moves a cell's
 difference by more than :data:`CHECK_TOLERANCE_M` (or first makes it known), near the vehicle,
 the difference is read again, and the sums over the disc round each cell of the differences as
 read are moved with it (the ``checked`` and ``disc`` layers). A cell's slope is that of the mean

@@ -114,6 +114,15 @@ SUM_WX, SUM_WY, SUM_WZ, SUM_W = 0, 1, 2, 3
 SUM_VZ, SUM_VZZ, SUM_V, SUM_COUNT = 4, 5, 6, 7
 FRAME_SUMS = 8
 
+# Each cell's values in the ground's shape (the ``shape`` layer, terrapref.groundmap.layers): its
+# difference along x, the run between the returns it is read between, its weight, then likewise
+# along y. A difference along an axis is read at its first value (SHAPE_X or SHAPE_Y) and the two
+# after it. One array, not six: a kernel's helper handed an array costs its reference count,
+# more than the helper's own reading of a few cells.
+SHAPE_X, SHAPE_Y = 0, 3
+RISE, RUN, WEIGHT = 0, 1, 2
+SHAPE_VALUES = 6
+
 
 @njit(cache=True, nogil=True)
 def depth_frame(
@@ -126,7 +135,7 @@ def depth_frame(
     errors: tuple[float, float, float],
     votes: tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray],
     heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    shape: tuple[np.ndarray, ...],
+    shape: np.ndarray,
     scratch: tuple[np.ndarray, np.ndarray],
     rough: tuple[np.ndarray, np.ndarray, int, float],
 ) -> np.ndarray:
@@ -150,7 +159,7 @@ def depth_frame(
       weight; terrapref.groundmap.height.Heights) the frame's returns, folded in as the
       weighted mean and sum of squared deviations of all its returns would take them one by one
       (the frame's sums combined with the cell's, as Chan's parallel update combines two sets);
-    - in ``shape`` (terrapref.groundmap.layers) its height difference to its neighbour along x
+    - in ``shape`` ((n, n, :data:`SHAPE_VALUES`) float32, terrapref.groundmap.layers) its height difference to its neighbour along x
       (and the run between them along x, and their weight), and likewise along y, as this frame
       alone shows them: its mean return differenced with theirs, each difference folded into
       the cell's means of them weighed by the inverse of its variance (``shape`` holds the
@@ -198,10 +207,13 @@ def _gather_returns(
     n = int(math.sqrt(slot.shape[0]) + 0.5)
     touched = np.empty(rows.shape[0], np.int64)
     count = 0
+    # The ray's turn and the centre as numbers: an array handed to a helper costs its reference count.
+    turn = (axes[0, 0], axes[1, 0], axes[2, 0], axes[0, 1], axes[1, 1], axes[2, 1], axes[0, 2], axes[1, 2], axes[2, 2])
+    origin = (centre[0], centre[1], centre[2])
     for i in range(rows.shape[0]):
         vote_cell[i] = -1
         d = np.float64(depth[rows[i], cols[i]])
-        x, y, z, cell = _return_at(d, ray[i], axes, centre, grid, n)
+        x, y, z, cell = _return_at(d, (ray[i, 0], ray[i, 1], ray[i, 2]), turn, origin, grid, n)
         if cell < 0:
             continue
         column = columns[ids[i]]
@@ -234,14 +246,20 @@ def _gather_returns(
 
 @njit(cache=True, nogil=True, inline="always")
 def _return_at(
-    d: float, ray: np.ndarray, axes: np.ndarray, centre: np.ndarray, grid: tuple[float, float, float], n: int
+    d: float,
+    ray: tuple[float, float, float],
+    turn: tuple[float, float, float, float, float, float, float, float, float],
+    centre: tuple[float, float, float],
+    grid: tuple[float, float, float],
+    n: int,
 ) -> tuple[float, float, float, int]:
-    """The return of depth ``d`` along ``ray`` (3,) (:func:`depth_frame`) and the cell of the n by
+    """The return of depth ``d`` along ``ray`` (x, y, z in the camera frame; ``turn``: the world's
+    x, y and z of the camera's axes, each as right, down, forward; :func:`depth_frame`) and the cell of the n by
     n ``grid`` it falls in (flat index; -1 where it falls off the grid or there is no return)."""
     ox, oy, inv_res = grid
-    x = centre[0] + d * (ray[0] * axes[0, 0] + ray[1] * axes[1, 0] + ray[2] * axes[2, 0])
-    y = centre[1] + d * (ray[0] * axes[0, 1] + ray[1] * axes[1, 1] + ray[2] * axes[2, 1])
-    z = centre[2] + d * (ray[0] * axes[0, 2] + ray[1] * axes[1, 2] + ray[2] * axes[2, 2])
+    x = centre[0] + d * (ray[0] * turn[0] + ray[1] * turn[1] + ray[2] * turn[2])
+    y = centre[1] + d * (ray[0] * turn[3] + ray[1] * turn[4] + ray[2] * turn[5])
+    z = centre[2] + d * (ray[0] * turn[6] + ray[1] * turn[7] + ray[2] * turn[8])
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return x, y, z, -1
     u, v = (x - ox) * inv_res, (y - oy) * inv_res
@@ -274,12 +292,11 @@ def _fold_heights(heights: tuple[np.ndarray, ...], sums: np.ndarray, touched: np
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _fold_shape(shape: tuple[np.ndarray, ...], sums: np.ndarray, slot: np.ndarray, touched: np.ndarray, count: int) -> None:
+def _fold_shape(shape: np.ndarray, sums: np.ndarray, slot: np.ndarray, touched: np.ndarray, count: int) -> None:
     """:func:`depth_frame`'s shape: each cell's differences to its neighbours along x and y, as
     the frame shows them. Each cell's sums (its row of ``sums``) become its mean return and the
     variance of that mean (the inverse of its weight) first."""
-    dx, dx_run, dxw, dy, dy_run, dyw = shape
-    n = dx.shape[0]
+    n = shape.shape[0]
     for i in range(count):
         variance = 1.0 / sums[i, SUM_W]
         sums[i, SUM_WX], sums[i, SUM_WY], sums[i, SUM_WZ] = (
@@ -295,23 +312,23 @@ def _fold_shape(shape: tuple[np.ndarray, ...], sums: np.ndarray, slot: np.ndarra
         above = slot[t + n] if row + 1 < n else -1
         if right >= 0:
             w = 1.0 / (sums[i, SUM_W] + sums[right, SUM_W])
-            _fold_difference(dx, dx_run, dxw, row, col, w, sums[right, SUM_WZ] - sums[i, SUM_WZ], sums[right, SUM_WX] - sums[i, SUM_WX])
+            _fold_difference(shape, SHAPE_X, row, col, w, sums[right, SUM_WZ] - sums[i, SUM_WZ], sums[right, SUM_WX] - sums[i, SUM_WX])
         if above >= 0:
             w = 1.0 / (sums[i, SUM_W] + sums[above, SUM_W])
-            _fold_difference(dy, dy_run, dyw, row, col, w, sums[above, SUM_WZ] - sums[i, SUM_WZ], sums[above, SUM_WY] - sums[i, SUM_WY])
+            _fold_difference(shape, SHAPE_Y, row, col, w, sums[above, SUM_WZ] - sums[i, SUM_WZ], sums[above, SUM_WY] - sums[i, SUM_WY])
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _fold_difference(
-    mean: np.ndarray, mean_run: np.ndarray, weight: np.ndarray, row: int, col: int, w: float, rise: float, run: float
-) -> None:
-    """A difference (``rise`` over ``run`` [m]) of weight ``w`` folded into cell (``row``, ``col``)'s
-    weighted means of them and their weights' sum."""
-    total = np.float64(weight[row, col]) + w
+def _fold_difference(shape: np.ndarray, axis: int, row: int, col: int, w: float, rise: float, run: float) -> None:
+    """A difference (``rise`` over ``run`` [m]) of weight ``w`` along ``axis`` (its first value in
+    ``shape``: :data:`SHAPE_X` or :data:`SHAPE_Y`) folded into cell (``row``, ``col``)'s weighted
+    means of them and their weights' sum."""
+    total = np.float64(shape[row, col, axis + WEIGHT]) + w
     share = w / total
-    mean[row, col] = np.float64(mean[row, col]) + (rise - np.float64(mean[row, col])) * share
-    mean_run[row, col] = np.float64(mean_run[row, col]) + (run - np.float64(mean_run[row, col])) * share
-    weight[row, col] = total
+    held_rise, held_run = np.float64(shape[row, col, axis + RISE]), np.float64(shape[row, col, axis + RUN])
+    shape[row, col, axis + RISE] = held_rise + (rise - held_rise) * share
+    shape[row, col, axis + RUN] = held_run + (run - held_run) * share
+    shape[row, col, axis + WEIGHT] = total
 
 
 # A frame's roughness of a cell is read from at least this many of its cells in the cell's disc,
@@ -405,7 +422,7 @@ DISC_SUMS = 6
 
 @njit(cache=True, nogil=True)
 def shape_geometry(
-    shape: tuple[np.ndarray, ...],
+    shape: np.ndarray,
     reading: tuple[float, float],
     disc: np.ndarray,
     rows: np.ndarray,
@@ -435,7 +452,7 @@ def shape_geometry(
 
 @njit(cache=True, nogil=True)
 def block_cells(
-    shape: tuple[np.ndarray, ...],
+    shape: np.ndarray,
     reading: tuple[float, float],
     disc: np.ndarray,
     cells: np.ndarray,
@@ -464,7 +481,7 @@ def block_cells(
 
 @njit(cache=True, nogil=True, inline="always")
 def _slope_and_step(
-    shape: tuple[np.ndarray, ...], reading: tuple[float, float], disc: np.ndarray, r0: int, c0: int, h: np.ndarray
+    shape: np.ndarray, reading: tuple[float, float], disc: np.ndarray, r0: int, c0: int, h: np.ndarray
 ) -> tuple[float, float]:
     """Cell (``r0``, ``c0``)'s slope [rad] and step [m] (:func:`shape_geometry`; ``h`` (3, 3): scratch)."""
     gx, gy = _disc_gradient(disc, r0, c0)
@@ -548,19 +565,17 @@ def _move_in_discs(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _step(shape: tuple[np.ndarray, ...], reading: tuple[float, float], r0: int, c0: int, h: np.ndarray) -> float:
+def _step(shape: np.ndarray, reading: tuple[float, float], r0: int, c0: int, h: np.ndarray) -> float:
     """The height range over cell (``r0``, ``c0``) and its eight neighbours (``h`` (3, 3): scratch),
     from the differences between them (:func:`shape_geometry`); NaN where fewer than two are known."""
-    dx, dx_run, dxw, dy, dy_run, dyw = shape
     least, cell = reading
-    along_x, along_y = (dx, dx_run, dxw), (dy, dy_run, dyw)
     h[:] = np.nan
     h[1, 1] = 0.0
     # Along the row and the column through the cell: h[1, 2] - h[1, 1] is the x difference at (r0, c0).
-    h[1, 2] = _rise(along_x, least, cell, r0, c0, 1)
-    h[1, 0] = -_rise(along_x, least, cell, r0, c0 - 1, 1)
-    h[2, 1] = _rise(along_y, least, cell, r0, c0, 0)
-    h[0, 1] = -_rise(along_y, least, cell, r0 - 1, c0, 0)
+    h[1, 2] = _rise(shape, SHAPE_X, least, cell, r0, c0, 1)
+    h[1, 0] = -_rise(shape, SHAPE_X, least, cell, r0, c0 - 1, 1)
+    h[2, 1] = _rise(shape, SHAPE_Y, least, cell, r0, c0, 0)
+    h[0, 1] = -_rise(shape, SHAPE_Y, least, cell, r0 - 1, c0, 0)
     # The corners: from their row's middle cell along x, and from their column's middle cell along y.
     for a in (0, 2):
         r = r0 + a - 1
@@ -568,12 +583,12 @@ def _step(shape: tuple[np.ndarray, ...], reading: tuple[float, float], r0: int, 
             c = c0 + b - 1
             total, ways = 0.0, 0
             cx = c0 if b == 2 else c0 - 1  # the x difference between the middle of row a and the corner
-            rise = _rise(along_x, least, cell, r, cx, 1)
+            rise = _rise(shape, SHAPE_X, least, cell, r, cx, 1)
             if not (math.isnan(h[a, 1]) or math.isnan(rise)):
                 total += h[a, 1] + (rise if b == 2 else -rise)
                 ways += 1
             ry = r0 if a == 2 else r0 - 1  # the y difference between the middle of column b and the corner
-            rise = _rise(along_y, least, cell, ry, c, 0)
+            rise = _rise(shape, SHAPE_Y, least, cell, ry, c, 0)
             if not (math.isnan(h[1, b]) or math.isnan(rise)):
                 total += h[1, b] + (rise if a == 2 else -rise)
                 ways += 1
@@ -588,9 +603,10 @@ def _step(shape: tuple[np.ndarray, ...], reading: tuple[float, float], r0: int, 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _rise(along: tuple[np.ndarray, np.ndarray, np.ndarray], least: float, cell: float, r: int, c: int, axis: int) -> float:
-    """The difference at (``r``, ``c``) along ``axis`` (1: x, 0: y; ``along``: its differences,
-    their runs and weights) referred to a cell's run: NaN where its weight is under ``least``.
+def _rise(shape: np.ndarray, first: int, least: float, cell: float, r: int, c: int, axis: int) -> float:
+    """The difference at (``r``, ``c``) along ``axis`` (1: x, 0: y; ``first``: its first value in
+    ``shape``, :data:`SHAPE_X` or :data:`SHAPE_Y`) referred to a cell's run: NaN where its weight
+    is under ``least``.
 
     A difference is the rise between two cells' mean returns, which lie anywhere in their cells:
     on a slope, returns gathered at a far cell's near edge lengthen its run to up to twice a
@@ -599,30 +615,30 @@ def _rise(along: tuple[np.ndarray, np.ndarray, np.ndarray], least: float, cell: 
     gentlest of them where all rise the same way, none otherwise, and none where it has no known
     neighbour. On a plane every difference then reads as a cell's; at a ledge its neighbours are
     level and its rise is kept whole."""
-    rise, run, weight = along
-    n = rise.shape[0]
-    if not (0 <= r < n and 0 <= c < n) or weight[r, c] < least:
+    rise, run, weight = first + RISE, first + RUN, first + WEIGHT
+    n = shape.shape[0]
+    if not (0 <= r < n and 0 <= c < n) or shape[r, c, weight] < least:
         return np.nan
-    here = np.float64(rise[r, c])
-    if not run[r, c] > 0.0:
+    here = np.float64(shape[r, c, rise])
+    if not shape[r, c, run] > 0.0:
         return here
-    grade, known = here / np.float64(run[r, c]), 0
+    grade, known = here / np.float64(shape[r, c, run]), 0
     for k in (-1, 1):
         rr, cc = r + k * (1 - axis), c + k * axis
-        if not (0 <= rr < n and 0 <= cc < n) or weight[rr, cc] < least or not run[rr, cc] > 0.0:
+        if not (0 <= rr < n and 0 <= cc < n) or shape[rr, cc, weight] < least or not shape[rr, cc, run] > 0.0:
             continue
-        theirs = np.float64(rise[rr, cc]) / np.float64(run[rr, cc])
+        theirs = np.float64(shape[rr, cc, rise]) / np.float64(shape[rr, cc, run])
         if theirs * grade <= 0.0:
             return here
         grade = theirs if abs(theirs) < abs(grade) else grade
         known += 1
-    return here + grade * (cell - np.float64(run[r, c])) if known else here
+    return here + grade * (cell - np.float64(shape[r, c, run])) if known else here
 
 
 @njit(cache=True, nogil=True)
 def shape_to_check(
     touched: np.ndarray,
-    shape: tuple[np.ndarray, ...],
+    shape: np.ndarray,
     least_weight: float,
     checked: tuple[np.ndarray, ...],
     disc: np.ndarray,
@@ -641,9 +657,8 @@ def shape_to_check(
     again (flat indices, each once). ``near``: the map's corner (x, y), its resolution, the
     vehicle's (x, y) and the range within which cells are read [m]; ``mark`` (n * n,) uint8, all
     0: scratch, left all 0."""
-    dx, dx_run, dxw, dy, dy_run, dyw = shape
     checked_x, checked_x_run, checked_y, checked_y_run = checked
-    n = dx.shape[0]
+    n = shape.shape[0]
     ox, oy, res, x, y, range_m = near
     out = np.empty(1024, np.int64)
     count = 0
@@ -653,20 +668,20 @@ def shape_to_check(
         ex, ey = ox + (col + 0.5) * res - x, oy + (row + 0.5) * res - y
         if ex * ex + ey * ey > range_m * range_m:
             continue
-        now_x = dx[row, col] if dxw[row, col] >= least_weight else np.nan
-        now_y = dy[row, col] if dyw[row, col] >= least_weight else np.nan
+        now_x = shape[row, col, SHAPE_X + RISE] if shape[row, col, SHAPE_X + WEIGHT] >= least_weight else np.nan
+        now_y = shape[row, col, SHAPE_Y + RISE] if shape[row, col, SHAPE_Y + WEIGHT] >= least_weight else np.nan
         moved_x = not _same(now_x, checked_x[row, col], tolerance_m)
         moved_y = not _same(now_y, checked_y[row, col], tolerance_m)
         if not (moved_x or moved_y):
             continue
         if moved_x:
             was = (np.float64(checked_x[row, col]), np.float64(checked_x_run[row, col]))
-            checked_x[row, col], checked_x_run[row, col] = now_x, dx_run[row, col]
+            checked_x[row, col], checked_x_run[row, col] = now_x, shape[row, col, SHAPE_X + RUN]
             now = (np.float64(checked_x[row, col]), np.float64(checked_x_run[row, col]))
             _move_in_discs(disc, DISC_RISE_X, row, col, reach, was, now)
         if moved_y:
             was = (np.float64(checked_y[row, col]), np.float64(checked_y_run[row, col]))
-            checked_y[row, col], checked_y_run[row, col] = now_y, dy_run[row, col]
+            checked_y[row, col], checked_y_run[row, col] = now_y, shape[row, col, SHAPE_Y + RUN]
             now = (np.float64(checked_y[row, col]), np.float64(checked_y_run[row, col]))
             _move_in_discs(disc, DISC_RISE_Y, row, col, reach, was, now)
         out, count = _mark_disc(row, col, reach, mark, n, out, count)

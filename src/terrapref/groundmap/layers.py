@@ -65,13 +65,9 @@ LAYERS: tuple[Layer, ...] = (
     # (terrapref.groundmap.height_compiled.depth_frame): each cell's height difference to its
     # neighbour along x and the run between their returns along x, each the mean of the frames'
     # weighed by the inverse of its variance [m], the weights' sum [1 / m^2], and likewise along
-    # y. What its slope and steps are read from.
-    Layer("dx", np.float32, 0.0),
-    Layer("dx_run", np.float32, 0.0),
-    Layer("dx_weight", np.float32, 0.0),
-    Layer("dy", np.float32, 0.0),
-    Layer("dy_run", np.float32, 0.0),
-    Layer("dy_weight", np.float32, 0.0),
+    # y (height_compiled.SHAPE_VALUES: one cell's six together, as the kernels read them). What
+    # its slope and steps are read from.
+    Layer("shape", np.float32, 0.0, values=6),
     # The differences along x and y as the cells round each were last read (NaN: not known then;
     # +inf: never read), so that only the cells round a changed one are read again, and the runs
     # read with them (NaN where the difference is not a number).

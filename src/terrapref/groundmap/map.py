@@ -294,19 +294,20 @@ class GroundMap:
         return self._layers["disc"]
 
     @property
-    def _shape(self) -> tuple[np.ndarray, ...]:
+    def _shape(self) -> np.ndarray:
         """The ground's shape as the kernels take it (terrapref.groundmap.height_compiled.depth_frame)."""
-        return tuple(self.layer(name) for name in ("dx", "dx_run", "dx_weight", "dy", "dy_run", "dy_weight"))
+        return self._layers["shape"]
 
     def read_shape(self) -> None:
-        """Read the ground's shape afresh over the whole map as its ``dx`` and ``dy`` layers now
-        hold it (each frame's depth image reads it where the frame changed it): for code that
-        writes those layers itself. The slope and the gradients are read from what was read."""
-        least = self.height_settings.least_weight
-        for axis in ("x", "y"):
-            known = self.layer(f"d{axis}_weight").astype(np.float64) >= least  # as the kernels compare them
-            self.layer(f"checked_d{axis}")[...] = np.where(known, self.layer(f"d{axis}"), np.float32(np.nan))
-            self.layer(f"checked_d{axis}_run")[...] = self.layer(f"d{axis}_run")
+        """Read the ground's shape afresh over the whole map as its ``shape`` layer now holds it
+        (each frame's depth image reads it where the frame changed it): for code that writes that
+        layer itself. The slope and the gradients are read from what was read."""
+        least, shape = self.height_settings.least_weight, self._shape
+        for axis, first in (("x", height_kernels.SHAPE_X), ("y", height_kernels.SHAPE_Y)):
+            rise, run, weight = (shape[..., first + k] for k in (height_kernels.RISE, height_kernels.RUN, height_kernels.WEIGHT))
+            known = weight.astype(np.float64) >= least  # as the kernels compare them
+            self.layer(f"checked_d{axis}")[...] = np.where(known, rise, np.float32(np.nan))
+            self.layer(f"checked_d{axis}_run")[...] = run
         reach = disc_reach(self.height_settings, self.settings.map_resolution_m)
         height_kernels.disc_sums(self._checked, reach, np.arange(self._n * self._n), self._disc)
 
