@@ -72,10 +72,11 @@ def dataset_file(path: Path, n: int = 300, seed: int = 0) -> Path:
     return save_dataset(data, path)
 
 
-def one_line_error(capsys, *words: str) -> str:
-    """The one line of a refusal on stderr, which names every one of ``words``."""
+def one_line_error(capsys, *words: str, progress: str | None = None) -> str:
+    """The one line of a refusal on stderr, which names every one of ``words``; with ``progress``,
+    after the lines of that progress bar (a command that failed part way)."""
     err = capsys.readouterr().err
-    lines = err.strip().splitlines()
+    lines = [line for line in err.strip().splitlines() if progress is None or not line.startswith(f"{progress}: ")]
     assert len(lines) == 1 and lines[0].startswith("error: "), err
     assert "Traceback" not in err and "internal error" not in err, err
     for word in words:

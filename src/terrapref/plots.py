@@ -266,7 +266,16 @@ LABEL_WIDTH = 26  # characters per line of a zone's label: a long one is wrapped
 
 
 def _wrapped(text: str) -> str:
-    return "\n".join(textwrap.wrap(text, LABEL_WIDTH, break_long_words=False, break_on_hyphens=False)) or text
+    return _bars_at_ends(textwrap.wrap(text, LABEL_WIDTH, break_long_words=False, break_on_hyphens=False)) or text
+
+
+def _bars_at_ends(lines: list[str]) -> str:
+    """Wrapped ``lines`` joined, a zone label's ``|`` that a break left at a line's start moved to
+    the end of the line before (so each line but the last ends with it)."""
+    for k in range(1, len(lines)):
+        if lines[k].startswith("| "):
+            lines[k - 1], lines[k] = f"{lines[k - 1]} |", lines[k][2:]
+    return "\n".join(lines)
 
 
 def save_map(
@@ -690,7 +699,7 @@ def _name_spans(ax: plt.Axes, spans: Sequence[tuple[str, float, float]]) -> None
     clear of the speeds drawn below."""
     for label, s0, s1 in spans:
         ax.axvspan(s0, s1, color="0.85", lw=0)
-        name = "\n".join(textwrap.wrap(label, SPAN_NAME_WIDTH, max_lines=2, placeholder=" ...")) or label
+        name = _bars_at_ends(textwrap.wrap(label, SPAN_NAME_WIDTH, max_lines=2, placeholder=" ...")) or label
         ax.text((s0 + s1) / 2, 0.04, name, rotation=90, ha="center", va="bottom", fontsize=6.5, color="0.25", linespacing=1.0)
     ax.set_ylim(0, 1)
     ax.set_yticks([])

@@ -59,8 +59,10 @@ class Progress:
                 sys.stderr.write(f"{self.label}: {frac * 100:3.0f}% {note + ' ' if note else ''}({time_left(now - self.start, frac)})\n")
 
     def close(self, summary: str = "") -> None:
+        """End the bar (once: later calls, and updates, do nothing), with ``summary`` if given."""
         if not self.enabled:
             return
+        self.enabled = False
         if self.tty:
             sys.stderr.write("\n")
         if summary:

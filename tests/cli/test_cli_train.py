@@ -84,7 +84,10 @@ def test_a_featurized_recording_trains_as_the_recording_does(tmp_path: Path, cap
     )
     rec, data = tmp_path / "rec", tmp_path / "d.safetensors"
     assert main(["record", str(course), "--out", str(rec), "--quiet"]) == 0
+    capsys.readouterr()
     assert main(["featurize", str(rec), "--out", str(data)]) == 0
+    progress = [line for line in capsys.readouterr().err.splitlines() if line.startswith("featurize: ")]
+    assert len(progress) > 2 and "frames of 1 recording" in progress[1]  # frame by frame, not only once the recording is done
     for source, out in ((data, tmp_path / "from_data.safetensors"), (rec, tmp_path / "from_rec.safetensors")):
         rc = main(["train", str(source), "--out", str(out), "--epochs", "1", "--members", "1"])
         assert rc == 0, capsys.readouterr().err

@@ -103,7 +103,7 @@ def test_a_recording_replaced_while_it_is_featurised_fails_clearly(
 
     monkeypatch.setattr(recording_module, "read_label_png", read_then_replace)
     assert main(["featurize", str(rec), "--out", str(tmp_path / "ds.safetensors")]) == 2
-    one_line_error(capsys, str(rec), "replaced")
+    one_line_error(capsys, str(rec), "replaced", progress="featurize")
     assert not (tmp_path / "ds.safetensors").exists()
     assert len(read_recording(rec)) == len(read_recording(ordered_recording))  # the new one, whole, for the next reader
 

@@ -420,6 +420,7 @@ def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_
     small = str(REPO / "examples" / "classes" / "small.yaml")
     assert main(["course", "--classes", small, "--relief", "3", "--out", str(tmp_path / "hilly.yaml")]) == 0
     hilly = load_scenario(tmp_path / "hilly.yaml")
+    assert hilly.name == "teaching_course_relief"  # named apart from the flat course `course` writes
     minutes = hilly.path_length_m() / RELIEF_PACE_MPS / 60  # timed at the pace a driver keeps on relief, not the flat 1 m/s
     printed = capsys.readouterr().out
     assert f"expected drive about {minutes:.1f} minutes at {RELIEF_PACE_MPS:g} m/s on relief" in printed

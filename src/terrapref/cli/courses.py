@@ -220,7 +220,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
         table = table or default_classes()
         try:
             if args.relief is not None:  # the relief situations, and relief between them (SPEC 19)
-                course, items = relief_course(table, args.design, args.name or "teaching_course", args.relief)
+                course, items = relief_course(table, args.design, args.name or "teaching_course_relief", args.relief)
             else:
                 course, items = designed_course(table, args.design, args.name or "teaching_course")
         except ValueError as exc:
@@ -365,7 +365,7 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         "the drive stays within 10 minutes at 1 m/s (with --relief: 7 minutes at 0.85 m/s, each pair and lethal lone "
         "patch once in either design, the full one still with every strip on both sides)",
     )
-    p.add_argument("--name", help="the scenario's name (default: teaching_course, or the course driven + _more)")
+    p.add_argument("--name", help="the scenario's name (default teaching_course, or teaching_course_relief with --relief, or DRIVEN_more)")
     p.add_argument(
         "--relief",
         type=int,

@@ -60,11 +60,17 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     evaluation = _evaluation(args)  # every input checked before the first run
     with output_folder(args.out, args.force):
         bar = Progress("evaluate", runs)
+        courses = f"{len(args.scenarios)} course{'s' if len(args.scenarios) > 1 else ''}"
+
+        def ran(k: int, n: int) -> None:
+            bar.update(k, f"{k}/{n} runs")
+            if k == n:  # the figures take a few seconds a course
+                bar.close()
+                print(f"evaluate: scoring the runs and drawing the figures of {courses} ...", file=sys.stderr)
+
         view = live_view(args)
         try:
-            metrics = evaluate_model(
-                evaluation, args.out, engine, progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), watch=watching(view)
-            )
+            metrics = evaluate_model(evaluation, args.out, engine, progress=ran, watch=watching(view))
         finally:
             if view is not None:
                 view.stop()

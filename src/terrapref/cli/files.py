@@ -206,7 +206,9 @@ def export_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--model",
         help="with --format mcap or rosbag1: also write the costmap this model (with an offset rule) prices the recording's ground with, "
-        "as nav_msgs/OccupancyGrid and foxglove_msgs/Grid, once a second",
+        "as nav_msgs/OccupancyGrid, foxglove_msgs/Grid and grid_map_msgs/GridMap (with its learned speed and, on relief, "
+        "the ground's height, slope, roughness and step), once a second; with a speed rule, also the speed as Nav2's "
+        "speed filter (nav2_msgs/CostmapFilterInfo and its mask)",
     )
     add_classes_arg(p, check=True)
     add_force_arg(p)
