@@ -796,7 +796,8 @@ def test_a_courses_table_goes_with_its_drive_to_the_follow_up_training_and_evalu
     assert main(["record", str(course), "--out", str(me), "--quiet"]) == 0
     capsys.readouterr()
     assert main(["course", "--after", str(me), "--out", str(more)]) == 0
-    printed = capsys.readouterr().out
+    printed, said = capsys.readouterr()
+    assert "frames, then fitting them ..." in said.strip().splitlines()[-1]  # once featurised, the fit still to come is said
     left_open = "pairs open for a follow-up: "
     assert left_open in printed and "tree" in printed.split(left_open)[1].split(";")[0]  # no tree was driven beside
     assert _record_it(printed)[0] == str(more), "the command that works, not a --classes FILE placeholder"

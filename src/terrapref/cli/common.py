@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from terrapref.configargs import finite_float
@@ -277,6 +278,18 @@ def by_recording(bar):
         p.recordings * p.frames_done / max(p.frames, 1),
         f"{p.frames_done}/{p.frames} frames of {p.recordings} recording{'s' if p.recordings != 1 else ''}",
     )
+
+
+def counted(bar, unit: str, then: str) -> Callable[[int, int], None]:
+    """A ``(done, total)`` progress that moves ``bar`` and closes it with ``then`` once all are done
+    (for a command whose work goes on after them)."""
+
+    def tick(done: int, total: int) -> None:
+        bar.update(done, f"{done}/{total} {unit}")
+        if done == total:
+            bar.close(then)
+
+    return tick
 
 
 def incidents(log) -> str:

@@ -287,6 +287,7 @@ def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> lis
 
 def _follow_up_plan(recs: Sequence) -> FollowUp:
     """What recordings' drives together leave open and a follow-up course can settle (the report ``inspect`` prints)."""
+    from terrapref.cli.common import counted
     from terrapref.progress import Progress
     from terrapref.recipes import DEFAULT_RECIPE, follow_up_plan, recipe_named
 
@@ -295,8 +296,8 @@ def _follow_up_plan(recs: Sequence) -> FollowUp:
             raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
     total = sum(len(r) for r in recs)
     bar = Progress(f"featurising the drive{'s' if len(recs) > 1 else ''} to find the pairs left open", total, unit="frames")
-    plan = follow_up_plan(list(recs), recipe_named(DEFAULT_RECIPE), frames=lambda done, n: bar.update(done, f"{done}/{n} frames"))
-    bar.close(f"{total} frames")
+    plan = follow_up_plan(list(recs), recipe_named(DEFAULT_RECIPE), frames=counted(bar, "frames", f"{total} frames, then fitting them ..."))
+    bar.close(f"{total} frames")  # (closed once all were featurised: the fit that follows takes a while too)
     return plan
 
 
