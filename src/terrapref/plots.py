@@ -273,9 +273,9 @@ def _bars_at_ends(lines: list[str]) -> str:
     """Wrapped ``lines`` joined, a zone label's ``|`` that a break left at a line's start moved to
     the end of the line before (so each line but the last ends with it)."""
     for k in range(1, len(lines)):
-        if lines[k].startswith("| "):
+        if lines[k] == "|" or lines[k].startswith("| "):
             lines[k - 1], lines[k] = f"{lines[k - 1]} |", lines[k][2:]
-    return "\n".join(lines)
+    return "\n".join(line for line in lines if line)
 
 
 def save_map(

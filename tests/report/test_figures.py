@@ -325,7 +325,7 @@ def test_the_speed_figures_zone_names_stand_above_the_speeds_never_over_them(tmp
         assert box.y0 >= panels[0].get_window_extent(renderer).y1
 
 
-def test_a_wrapped_zone_label_ends_its_lines_with_the_bar_between_classes(tmp_path, monkeypatch):
+def test_a_wrapped_zone_label_ends_its_lines_with_the_bar_between_classes():
     """A label of classes broken across lines keeps each `|` at the end of a line, on the map and
     over the speed figure's zone stretches, never at the start of the next."""
     import textwrap
@@ -336,3 +336,4 @@ def test_a_wrapped_zone_label_ends_its_lines_with_the_bar_between_classes(tmp_pa
     assert plots._wrapped(label) == "3: non_traversable | water |\nmud"
     assert plots._bars_at_ends(textwrap.wrap(label, plots.SPAN_NAME_WIDTH)) == "3: non_traversable |\nwater | mud"
     assert plots._bars_at_ends(["a | b"]) == "a | b" and plots._bars_at_ends([]) == ""
+    assert plots._bars_at_ends(["1: " + "x" * 23, "|", "y" * 25]) == "1: " + "x" * 23 + " |\n" + "y" * 25  # a bar alone on its line

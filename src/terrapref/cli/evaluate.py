@@ -66,7 +66,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             bar.update(k, f"{k}/{n} runs")
             if k == n:  # the figures take a few seconds a course
                 bar.close()
-                print(f"evaluate: scoring the runs and drawing the figures of {courses} ...", file=sys.stderr)
+                print(f"evaluate: {n} run{'s' if n > 1 else ''} done; scoring and drawing the figures of {courses} ...", file=sys.stderr)
 
         view = live_view(args)
         try:

@@ -159,8 +159,9 @@ def depth_frame(
       weight; terrapref.groundmap.height.Heights) the frame's returns, folded in as the
       weighted mean and sum of squared deviations of all its returns would take them one by one
       (the frame's sums combined with the cell's, as Chan's parallel update combines two sets);
-    - in ``shape`` ((n, n, :data:`SHAPE_VALUES`) float32, terrapref.groundmap.layers) its height difference to its neighbour along x
-      (and the run between them along x, and their weight), and likewise along y, as this frame
+    - in ``shape`` ((n, n, :data:`SHAPE_VALUES`) float32, terrapref.groundmap.layers) its
+      height difference to its neighbour along x (and the run between them along x, and their
+      weight), and likewise along y, as this frame
       alone shows them: its mean return differenced with theirs, each difference folded into
       the cell's means of them weighed by the inverse of its variance (``shape`` holds the
       weighted means and the weights' sums). The attitude's error is left out of these: it tilts
@@ -615,24 +616,24 @@ def _rise(shape: np.ndarray, first: int, least: float, cell: float, r: int, c: i
     gentlest of them where all rise the same way, none otherwise, and none where it has no known
     neighbour. On a plane every difference then reads as a cell's; at a ledge its neighbours are
     level and its rise is kept whole."""
-    rise, run, weight = first + RISE, first + RUN, first + WEIGHT
+    at_rise, at_run, at_weight = first + RISE, first + RUN, first + WEIGHT  # where in a cell's values
     n = shape.shape[0]
-    if not (0 <= r < n and 0 <= c < n) or shape[r, c, weight] < least:
+    if not (0 <= r < n and 0 <= c < n) or shape[r, c, at_weight] < least:
         return np.nan
-    here = np.float64(shape[r, c, rise])
-    if not shape[r, c, run] > 0.0:
+    here = np.float64(shape[r, c, at_rise])
+    if not shape[r, c, at_run] > 0.0:
         return here
-    grade, known = here / np.float64(shape[r, c, run]), 0
+    grade, known = here / np.float64(shape[r, c, at_run]), 0
     for k in (-1, 1):
         rr, cc = r + k * (1 - axis), c + k * axis
-        if not (0 <= rr < n and 0 <= cc < n) or shape[rr, cc, weight] < least or not shape[rr, cc, run] > 0.0:
+        if not (0 <= rr < n and 0 <= cc < n) or shape[rr, cc, at_weight] < least or not shape[rr, cc, at_run] > 0.0:
             continue
-        theirs = np.float64(shape[rr, cc, rise]) / np.float64(shape[rr, cc, run])
+        theirs = np.float64(shape[rr, cc, at_rise]) / np.float64(shape[rr, cc, at_run])
         if theirs * grade <= 0.0:
             return here
         grade = theirs if abs(theirs) < abs(grade) else grade
         known += 1
-    return here + grade * (cell - np.float64(shape[r, c, run])) if known else here
+    return here + grade * (cell - np.float64(shape[r, c, at_run])) if known else here
 
 
 @njit(cache=True, nogil=True)

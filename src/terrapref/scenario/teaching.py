@@ -582,7 +582,7 @@ def designed_course(
 
 
 def relief_course(
-    classes: ClassTable, design: str = "auto", name: str = "teaching_course", seed: int = 0
+    classes: ClassTable, design: str = "auto", name: str = "teaching_course_relief", seed: int = 0
 ) -> tuple[CourseBuilder, list[Situation]]:
     """The teaching course of ``classes`` with relief (``terrapref course --relief SEED``, and the
     packaged ``teach_relief`` of the default table with seed 0): :func:`designed_course` with the
