@@ -17,6 +17,7 @@ from terrapref.cli.common import (
     add_live_args,
     check_table,
     class_table,
+    counted,
     grid_engine,
     live_view,
     output_path,
@@ -61,13 +62,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     with output_folder(args.out, args.force):
         bar = Progress("evaluate", runs)
         courses = f"{len(args.scenarios)} course{'s' if len(args.scenarios) > 1 else ''}"
-
-        def ran(k: int, n: int) -> None:
-            bar.update(k, f"{k}/{n} runs")
-            if k == n:  # the figures take a few seconds a course
-                bar.close()
-                print(f"evaluate: {n} run{'s' if n > 1 else ''} done; scoring and drawing the figures of {courses} ...", file=sys.stderr)
-
+        # Once the runs are done the bar says what follows: the figures take a few seconds a course.
+        ran = counted(bar, "runs", f"{runs} run{'s' if runs > 1 else ''} done; scoring and drawing the figures of {courses} ...")
         view = live_view(args)
         try:
             metrics = evaluate_model(evaluation, args.out, engine, progress=ran, watch=watching(view))
