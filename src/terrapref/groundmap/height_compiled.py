@@ -573,10 +573,10 @@ def _step(shape: np.ndarray, reading: tuple[float, float], r0: int, c0: int, h: 
     h[:] = np.nan
     h[1, 1] = 0.0
     # Along the row and the column through the cell: h[1, 2] - h[1, 1] is the x difference at (r0, c0).
-    h[1, 2] = _rise(shape, SHAPE_X, least, cell, r0, c0, 1)
-    h[1, 0] = -_rise(shape, SHAPE_X, least, cell, r0, c0 - 1, 1)
-    h[2, 1] = _rise(shape, SHAPE_Y, least, cell, r0, c0, 0)
-    h[0, 1] = -_rise(shape, SHAPE_Y, least, cell, r0 - 1, c0, 0)
+    h[1, 2] = _rise(shape, SHAPE_X, least, cell, r0, c0)
+    h[1, 0] = -_rise(shape, SHAPE_X, least, cell, r0, c0 - 1)
+    h[2, 1] = _rise(shape, SHAPE_Y, least, cell, r0, c0)
+    h[0, 1] = -_rise(shape, SHAPE_Y, least, cell, r0 - 1, c0)
     # The corners: from their row's middle cell along x, and from their column's middle cell along y.
     for a in (0, 2):
         r = r0 + a - 1
@@ -584,12 +584,12 @@ def _step(shape: np.ndarray, reading: tuple[float, float], r0: int, c0: int, h: 
             c = c0 + b - 1
             total, ways = 0.0, 0
             cx = c0 if b == 2 else c0 - 1  # the x difference between the middle of row a and the corner
-            rise = _rise(shape, SHAPE_X, least, cell, r, cx, 1)
+            rise = _rise(shape, SHAPE_X, least, cell, r, cx)
             if not (math.isnan(h[a, 1]) or math.isnan(rise)):
                 total += h[a, 1] + (rise if b == 2 else -rise)
                 ways += 1
             ry = r0 if a == 2 else r0 - 1  # the y difference between the middle of column b and the corner
-            rise = _rise(shape, SHAPE_Y, least, cell, ry, c, 0)
+            rise = _rise(shape, SHAPE_Y, least, cell, ry, c)
             if not (math.isnan(h[1, b]) or math.isnan(rise)):
                 total += h[1, b] + (rise if a == 2 else -rise)
                 ways += 1
@@ -604,10 +604,10 @@ def _step(shape: np.ndarray, reading: tuple[float, float], r0: int, c0: int, h: 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _rise(shape: np.ndarray, first: int, least: float, cell: float, r: int, c: int, axis: int) -> float:
-    """The difference at (``r``, ``c``) along ``axis`` (1: x, 0: y; ``first``: its first value in
-    ``shape``, :data:`SHAPE_X` or :data:`SHAPE_Y`) referred to a cell's run: NaN where its weight
-    is under ``least``.
+def _rise(shape: np.ndarray, first: int, least: float, cell: float, r: int, c: int) -> float:
+    """The difference at (``r``, ``c``) along the axis whose first value in ``shape`` is ``first``
+    (:data:`SHAPE_X` or :data:`SHAPE_Y`) referred to a cell's run: NaN where its weight is under
+    ``least``.
 
     A difference is the rise between two cells' mean returns, which lie anywhere in their cells:
     on a slope, returns gathered at a far cell's near edge lengthen its run to up to twice a
@@ -617,6 +617,7 @@ def _rise(shape: np.ndarray, first: int, least: float, cell: float, r: int, c: i
     neighbour. On a plane every difference then reads as a cell's; at a ledge its neighbours are
     level and its rise is kept whole."""
     at_rise, at_run, at_weight = first + RISE, first + RUN, first + WEIGHT  # where in a cell's values
+    along_x = 1 if first == SHAPE_X else 0  # the neighbours it is compared with: along x (columns) or along y (rows)
     n = shape.shape[0]
     if not (0 <= r < n and 0 <= c < n) or shape[r, c, at_weight] < least:
         return np.nan
@@ -625,7 +626,7 @@ def _rise(shape: np.ndarray, first: int, least: float, cell: float, r: int, c: i
         return here
     grade, known = here / np.float64(shape[r, c, at_run]), 0
     for k in (-1, 1):
-        rr, cc = r + k * (1 - axis), c + k * axis
+        rr, cc = r + k * (1 - along_x), c + k * along_x
         if not (0 <= rr < n and 0 <= cc < n) or shape[rr, cc, at_weight] < least or not shape[rr, cc, at_run] > 0.0:
             continue
         theirs = np.float64(shape[rr, cc, at_rise]) / np.float64(shape[rr, cc, at_run])
