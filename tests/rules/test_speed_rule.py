@@ -392,6 +392,29 @@ def _grades(track_grades: np.ndarray) -> np.ndarray:
     return np.stack([padded[i : i + STATIONS] for i in range(len(track_grades))])
 
 
+def test_cruising_speeds_are_read_net_of_what_gentle_grades_shed():
+    """Ground never quite level: every frame the fit counts as level (within 3 deg) rises or falls
+    1.5 deg, so a driver who sheds speed from the first degree drives its classes 0.03-0.045 m/s
+    under their speeds there; the fit reads the class speeds net of that (not the level frames'
+    median), what a degree sheds from the steep frames against them, and puts no limit in a bend
+    taken on a steep grade, whose slowing the grade explains."""
+    track = _track()
+    track_grades = np.where(np.arange(len(track)) % 40 < 20, 1.5, -1.5)
+    track_grades[62:78], track_grades[90:106] = 6.0, -8.0
+    way, curvature, _, frame = _drive(DRIVER, track)
+    curvature[BEND] = 0.2  # a gentle bend on the climb (62-78) and after it
+    grade = _grades(track_grades)
+    target = replace(DRIVER, up_mps_per_deg=0.03, down_mps_per_deg=0.02).predict(way, curvature, grade)
+    v = np.concatenate([np.full(2, target[0]), target[:-2]])
+    fit = fit_speed(Drive(way, curvature, v, frame, grade), K, (LETHAL,))
+    assert fit is not None and fit.lag_frames == 2
+    m = fit.model
+    shown = [WATER, ROCK, BACKGROUND]  # mud, never shown steady, is driven at the slowest speed the drive showed
+    np.testing.assert_allclose(np.array(m.speeds_mps)[shown], [0.5, 0.8, 1.6], atol=1e-3)
+    assert m.up_mps_per_deg == pytest.approx(0.03, abs=1e-3) and m.down_mps_per_deg == pytest.approx(0.02, abs=1e-3)
+    assert m.lateral_accel_mps2 is None
+
+
 def test_the_fit_recovers_what_grades_shed_up_and_down():
     """The long background stretch (frames 60-110) climbs 6 deg, then descends 8 deg; the class
     speeds are read from the level frames, what a degree sheds from the frames on one grade."""

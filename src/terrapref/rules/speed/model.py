@@ -47,6 +47,11 @@ ROUGH_BANDS_M = (0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03, 0.035, 0.04)  #
 # the drive showed no ground between them, and the fit keeps the middle one, not the smoothest (which
 # slows on roughness the drive never showed, as a noisy map reads smooth ground) nor the roughest.
 ROUGH_ALIKE_MPS = 0.001
+# The cruising speeds read net of what grades shed are read again with what that gives, until no
+# speed moves by more than NET_SETTLED_MPS, at most NET_ROUNDS times (each round takes a share of
+# the bias equal to how gentle the level frames' grades are against the steep ones').
+NET_ROUNDS = 8
+NET_SETTLED_MPS = 1e-4
 
 
 # The body's pitch at a station: the ground's gradient along the heading, averaged over a chord of
@@ -277,7 +282,10 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
     What a degree of grade up sheds is the median, over the frames whose way is one column alone
     and nearly straight, climbing past :data:`LEVEL_DEG` and nowhere going down past it, of the
     speed they fall short of that column's cruising speed by per degree of their steepest grade
-    up (down likewise); each is kept where it explains the frames better than none. On rough
+    up (down likewise); each is kept where it explains the frames better than none. On relief the
+    cruising speeds are read net of what the level frames' own grades shed, in turn with what a
+    degree sheds until both settle (:func:`_net_of_grades`), and the bends and lethal neighbours
+    are fitted on what terrain and grades leave unexplained. On rough
     ground: for each band of :data:`ROUGH_BANDS_M`, the median speed of the frames on one column
     alone, nearly straight, away from lethal terrain, slower than the terrain and grades ask
     and past the band within :data:`ROUGH_PREVIEW_M`; where any explains the frames better than
@@ -360,44 +368,85 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     inside = steady & np.all((wide == first[:, None]) | (wide > k), axis=1)
     climb, descent = steepest(grade, upto, len(way))
     on = (first[:, None] == np.arange(k + 1)).T
-    speeds, intervals = _cruising(frames, (steady & on, inside & on), near, (climb < LEVEL_DEG) & (descent < LEVEL_DEG))
-    known = [s for s in speeds if not math.isnan(s)]
-    if not known:
+    level = (climb < LEVEL_DEG) & (descent < LEVEL_DEG)
+    speeds, intervals = _cruising(frames, (steady & on, inside & on), near, level)
+    if all(math.isnan(s) for s in speeds):
         return None
-    # A class never shown steady is driven at the slowest speed the drive showed, not at a class's
-    # it may be far faster than (a drive that showed only its grass steady). A lethal column's speed
-    # is never read; it stays the slowest known, so that a drive that showed every other class
-    # steady fits the model it always did.
-    slowest = min(known)
-    unseen_mps = min(slowest, float(np.percentile(v, SLOWEST_PERCENTILE)))
-    speeds = [(slowest if col in lethal else unseen_mps) if math.isnan(s) else s for col, s in enumerate(speeds)]
-    base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal)
-    terrain_v = base.predict(way, curvature)
+    base = SpeedModel(_filled(speeds, v, lethal), preview_m, None, None, None, lethal)
+    if grade is not None:  # what the level frames' own grades shed taken off their cruising speeds first
+        base, intervals = _net_of_grades(frames, (base, intervals), (steady & on, inside & on, near, level, steady), (climb, descent))
+    terrain_v = base.predict(way, curvature, grade)
     bend = (terrain_v > 1.1 * v) & (np.abs(curvature) >= BEND_CURVATURE) & ~near
     best, best_error = base, float(np.mean(np.abs(terrain_v - v)))
     if np.count_nonzero(bend) >= MIN_FRAMES:  # a limit in bends, kept only where it explains the frames better than none
         for a_lat in np.percentile(v[bend] ** 2 * np.abs(curvature[bend]), (25, 50, 75)):
-            trial = SpeedModel(tuple(speeds), preview_m, float(a_lat), None, None, lethal)
-            error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
+            trial = replace(base, lateral_accel_mps2=float(a_lat))
+            error = float(np.mean(np.abs(trial.predict(way, curvature, grade) - v)))
             if error < best_error - 1e-9:
                 best, best_error = trial, error
-    a_lat = best.lateral_accel_mps2
-    allowed = best.predict(way, curvature)
+    allowed = best.predict(way, curvature, grade)
     for ring in RINGS_M:
         slowed = _near(way, upto, is_lethal, ring) & (allowed > 1.1 * v)
         if np.count_nonzero(slowed) < MIN_FRAMES:
             continue
-        trial = SpeedModel(tuple(speeds), preview_m, a_lat, ring, float(np.median(v[slowed])), lethal)
-        error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
+        trial = replace(best, near_lethal_m=ring, near_lethal_mps=float(np.median(v[slowed])))
+        error = float(np.mean(np.abs(trial.predict(way, curvature, grade) - v)))
         if error < best_error - 1e-9:
             best, best_error = trial, error
     grades = _Grades()
-    if grade is not None:
+    if grade is not None:  # the grades fitted again, with their intervals, on the model the bends and lethal terrain left
+        best = replace(best, up_mps_per_deg=None, down_mps_per_deg=None)
+        best_error = float(np.mean(np.abs(best.predict(way, curvature) - v)))
         best, grades = _fit_grades(best, best_error, frames, steady & ~near, (climb, descent))
     shown = None
     if rough is not None:
         best, shown = _fit_rough(best, frames, steady & ~near)
     return best, tuple(intervals), grades, shown
+
+
+def _filled(speeds: list[float], v: np.ndarray, lethal: tuple[int, ...]) -> tuple[float, ...]:
+    """The cruising speeds with each column the drive never showed steady (NaN) filled in: a class
+    is driven at the slowest speed the drive showed (``v``), not at a class's it may be far faster
+    than (a drive that showed only its grass steady). A lethal column's speed is never read; it
+    stays the slowest known, so that a drive that showed every other class steady fits the model
+    it always did."""
+    slowest = min(s for s in speeds if not math.isnan(s))
+    unseen_mps = min(slowest, float(np.percentile(v, SLOWEST_PERCENTILE)))
+    return tuple((slowest if col in lethal else unseen_mps) if math.isnan(s) else s for col, s in enumerate(speeds))
+
+
+def _net_of_grades(
+    frames: _Frames, found: tuple[SpeedModel, list], masks: tuple[np.ndarray, ...], steepest: tuple[np.ndarray, np.ndarray]
+) -> tuple[SpeedModel, list[tuple[float, float] | None]]:
+    """``base`` (cruising speeds read on level frames) with what grades shed and its cruising
+    speeds read again net of it, twice over: a level frame's way is within :data:`LEVEL_DEG` of
+    level, not level, and a driver who sheds speed from the first degree drives it slower than its
+    class's speed (a drive on gentle relief put the cautious style's grass 0.04-0.06 m/s low).
+    ``found``: the model and its cruising intervals; ``masks``: each column's frames steady on it
+    alone and well inside it, the frames near lethal terrain, the level frames, the steady ones.
+    As ``found`` where grades shed nothing."""
+    alone, inside, near, level, steady = masks
+    way, curvature, v, grade = frames.way, frames.curvature, frames.v, frames.grade
+    model = found[0]
+    upto = stations_within(model.preview_m)
+    quick = frames._replace(intervals=False)
+    for _ in range(NET_ROUNDS):
+        plain = replace(model, up_mps_per_deg=None, down_mps_per_deg=None)
+        shedding, _ = _fit_grades(plain, math.inf, quick, steady & ~near, steepest)  # what the steep frames shed, kept or not
+        if not shedding.sheds_on_grades:
+            return found
+        shed = np.max(shedding.shed(grade[:, :upto]), axis=1, initial=0.0)  # what it would take off each frame
+        net = frames._replace(v=v + shed)
+        speeds, _ = _cruising(net._replace(intervals=False), (alone, inside), near, level)
+        again = replace(shedding, speeds_mps=_filled(speeds, v, frames.lethal))
+        settled = np.allclose(again.speeds_mps, model.speeds_mps, rtol=0.0, atol=NET_SETTLED_MPS)
+        model = again
+        if settled:
+            break
+    # Kept where speeds and grades together explain the frames better than the speeds read on level frames alone.
+    if np.mean(np.abs(model.predict(way, curvature, grade) - v)) >= np.mean(np.abs(found[0].predict(way, curvature) - v)) - 1e-9:
+        return found
+    return model, (_cruising(net, (alone, inside), near, level)[1] if frames.intervals else found[1])
 
 
 def _cruising(
