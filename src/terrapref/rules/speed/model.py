@@ -272,9 +272,8 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
     way within the preview is that column alone, level (within :data:`LEVEL_DEG`) and nearly
     straight, with no lethal terrain near, well inside the column where the drive shows enough
     such frames (:func:`_cruising`; where it shows too few, at its edges too, then not level
-    too, then beside lethal terrain too); the
-    bend's limit the median ``v^2 * curvature`` of the frames slower than their terrain allows in
-    bends; the lethal neighbour's speed the median of the frames slower than both near lethal
+    too, then beside lethal terrain too); the bend's limit the median ``v^2 * curvature`` of the
+    frames slower than their terrain allows in bends; the lethal neighbour's speed the median of the frames slower than both near lethal
     terrain (the ring that explains them best). The preview and lag that explain all frames best
     (mean absolute error) are kept. A class the drive never showed at a steady speed is driven at
     the slowest speed the drive showed: the slowest cruising speed learned, or the
@@ -282,10 +281,9 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
     What a degree of grade up sheds is the median, over the frames whose way is one column alone
     and nearly straight, climbing past :data:`LEVEL_DEG` and nowhere going down past it, of the
     speed they fall short of that column's cruising speed by per degree of their steepest grade
-    up (down likewise); each is kept where it explains the frames better than none. On relief the
-    cruising speeds are read net of what the level frames' own grades shed, in turn with what a
-    degree sheds until both settle (:func:`_net_of_grades`), and the bends and lethal neighbours
-    are fitted on what terrain and grades leave unexplained. On rough
+    up (down likewise); each is kept where it explains the frames better than none; on relief
+    the cruising speeds are read net of it (:func:`_net_of_grades`) before bends and lethal
+    neighbours are fitted. On rough
     ground: for each band of :data:`ROUGH_BANDS_M`, the median speed of the frames on one column
     alone, nearly straight, away from lethal terrain, slower than the terrain and grades ask
     and past the band within :data:`ROUGH_PREVIEW_M`; where any explains the frames better than
