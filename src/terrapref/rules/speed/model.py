@@ -273,8 +273,8 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
     straight, with no lethal terrain near, well inside the column where the drive shows enough
     such frames (:func:`_cruising`; where it shows too few, at its edges too, then not level
     too, then beside lethal terrain too); the bend's limit the median ``v^2 * curvature`` of the
-    frames slower than their terrain allows in bends; the lethal neighbour's speed the median of the frames slower than both near lethal
-    terrain (the ring that explains them best). The preview and lag that explain all frames best
+    frames slower than their terrain allows in bends; the lethal neighbour's speed the median of
+    the frames slower than both near lethal terrain (the ring that explains them best). The preview and lag that explain all frames best
     (mean absolute error) are kept. A class the drive never showed at a steady speed is driven at
     the slowest speed the drive showed: the slowest cruising speed learned, or the
     :data:`SLOWEST_PERCENTILE` th percentile of its speeds while moving where that is slower.
@@ -416,13 +416,14 @@ def _filled(speeds: list[float], v: np.ndarray, lethal: tuple[int, ...]) -> tupl
 def _net_of_grades(
     frames: _Frames, found: tuple[SpeedModel, list], masks: tuple[np.ndarray, ...], steepest: tuple[np.ndarray, np.ndarray]
 ) -> tuple[SpeedModel, list[tuple[float, float] | None]]:
-    """``base`` (cruising speeds read on level frames) with what grades shed and its cruising
-    speeds read again net of it, twice over: a level frame's way is within :data:`LEVEL_DEG` of
-    level, not level, and a driver who sheds speed from the first degree drives it slower than its
-    class's speed (a drive on gentle relief put the cautious style's grass 0.04-0.06 m/s low).
-    ``found``: the model and its cruising intervals; ``masks``: each column's frames steady on it
-    alone and well inside it, the frames near lethal terrain, the level frames, the steady ones.
-    As ``found`` where grades shed nothing."""
+    """The model of ``found`` (its cruising speeds read on level frames, and their intervals) with
+    what grades shed and its cruising speeds read net of it, in turn until they settle
+    (:data:`NET_ROUNDS`, :data:`NET_SETTLED_MPS`): a level frame's way is within :data:`LEVEL_DEG`
+    of level, not level, and a driver who sheds speed from the first degree drives it slower than
+    its class's speed (a drive on gentle relief put the cautious style's grass 0.06 m/s low).
+    ``masks``: each column's frames steady on it alone and well inside it, the frames near lethal
+    terrain, the level frames, the steady ones. ``found`` as it was where the steep frames are too
+    few, or where speeds and grades together explain the frames no better than it."""
     alone, inside, near, level, steady = masks
     way, curvature, v, grade = frames.way, frames.curvature, frames.v, frames.grade
     model = found[0]
