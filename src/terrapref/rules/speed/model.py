@@ -427,14 +427,15 @@ def _net_of_grades(
     alone, inside, near, level, steady = masks
     way, curvature, v, grade = frames.way, frames.curvature, frames.v, frames.grade
     model = found[0]
-    upto = stations_within(model.preview_m)
+    climb, descent = steepest
     quick = frames._replace(intervals=False)
     for _ in range(NET_ROUNDS):
         plain = replace(model, up_mps_per_deg=None, down_mps_per_deg=None)
         shedding, _ = _fit_grades(plain, math.inf, quick, steady & ~near, steepest)  # what the steep frames shed, kept or not
         if not shedding.sheds_on_grades:
             return found
-        shed = np.max(shedding.shed(grade[:, :upto]), axis=1, initial=0.0)  # what it would take off each frame
+        # What it would take off each frame: its steepest station's shed (climb and descent as the model reads them).
+        shed = np.maximum((shedding.up_mps_per_deg or 0.0) * climb, (shedding.down_mps_per_deg or 0.0) * descent)
         net = frames._replace(v=v + shed)
         speeds, _ = _cruising(net._replace(intervals=False), (alone, inside), near, level)
         again = replace(shedding, speeds_mps=_filled(speeds, v, frames.lethal))
