@@ -11,8 +11,10 @@ beside the footprint on that way.
 
 A frame's way is read as terrain columns at stations ``STATION_STEP_M`` apart (the first under
 the vehicle) and at the footprint's points across (:data:`ACROSS`: the footprint's 5, then the
-lethal rings' 4), the grade of the way at each station [deg, positive up, NaN where the
-ground map does not know it] and its roughness there [m, the same]. The fit reads the way the driver drove; the planner reads the way it chose.
+lethal rings' 4), the grade the body would be pitched at on each of the footprint's points
+there, heading along the way [deg, positive up, NaN where the ground map does not know it: a
+driver slows for the steepest ground under its footprint, not only for the centre line's] and
+the roughness on the centre line [m, the same]. The fit reads the way the driver drove; the planner reads the way it chose.
 """
 
 from __future__ import annotations
@@ -106,6 +108,8 @@ class SpeedModel:
         down_mps_per_deg: ... and down.
         rough_m: the roughness past which ``rough_mps`` holds [m]; None: not learned ...
         rough_mps: ... the top speed there [m/s].
+        grades_across: whether the grades were read on each of the footprint's points (False:
+            on the way's centre line alone, as model files written before read them).
     """
 
     speeds_mps: tuple[float, ...]
@@ -120,6 +124,7 @@ class SpeedModel:
     down_mps_per_deg: float | None = None
     rough_m: float | None = None
     rough_mps: float | None = None
+    grades_across: bool = False
 
     @property
     def slows_on_rough(self) -> bool:
@@ -135,8 +140,9 @@ class SpeedModel:
         self, way: np.ndarray, curvature: np.ndarray, grade: np.ndarray | None = None, rough: np.ndarray | None = None
     ) -> np.ndarray:
         """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns, their curvatures (N,)
-        [1/m], their grades (N, STATIONS) [deg, positive up; NaN: unknown, taken as level; None:
-        all unknown] and their roughness (N, STATIONS) [m; NaN or None: unknown, taken as smooth]."""
+        [1/m], their grades (N, STATIONS) on the centre line or (N, STATIONS, 5) on each of the
+        footprint's points [deg, positive up; NaN: unknown, taken as level; None: all unknown]
+        and their roughness (N, STATIONS) [m; NaN or None: unknown, taken as smooth]."""
         upto = stations_within(self.preview_m)
         foot = way[:, :upto, :5]
         at = self._speeds[foot]
@@ -144,7 +150,8 @@ class SpeedModel:
             shared = (foot[..., :, None] == foot[..., None, :]).sum(axis=-1)
             at = np.where(shared >= self.min_points, at, np.nan)
         if grade is not None and self.sheds_on_grades:
-            at = at - self.shed(grade[:, :upto])[:, :, None]
+            g = grade[:, :upto]
+            at = at - self.shed(g if g.ndim == 3 else g[:, :, None])
         v = np.nanmin(at.reshape(len(way), -1), axis=1, initial=np.inf)
         v = np.where(np.isfinite(v), v, float(np.nanmin(self.speeds_mps)))  # nothing seen: the slowest cruising speed
         if rough is not None and self.slows_on_rough:
@@ -253,8 +260,9 @@ class Drive(NamedTuple):
     """The frames of a drive as the fit reads them (terrapref.rules.speed.rule.SpeedReader's arrays):
     the ways driven (N, STATIONS, 9), their curvatures (N, NaN where the vehicle stood), the speeds
     commanded (N) [m/s], the frames' numbers in their recordings (N; a lag pairs frames only within
-    one recording), the ways' grades (N, STATIONS) [deg, positive up, NaN where unknown; None: a
-    drive on flat ground] and their roughness (N, STATIONS) [m, the same]."""
+    one recording), the ways' grades (N, STATIONS, 5) on the footprint's points, or (N, STATIONS)
+    on the centre line as datasets featurised before read them [deg, positive up, NaN where
+    unknown; None: a drive on flat ground] and their roughness (N, STATIONS) [m, the same]."""
 
     way: np.ndarray
     curvature: np.ndarray
@@ -278,17 +286,16 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
     (mean absolute error) are kept. A class the drive never showed at a steady speed is driven at
     the slowest speed the drive showed: the slowest cruising speed learned, or the
     :data:`SLOWEST_PERCENTILE` th percentile of its speeds while moving where that is slower.
-    What a degree of grade up sheds is the median, over the frames whose way is one column alone
-    and nearly straight, climbing past :data:`LEVEL_DEG` and nowhere going down past it, of the
-    speed they fall short of that column's cruising speed by per degree of their steepest grade
-    up (down likewise); each is kept where it explains the frames better than none; on relief
-    the cruising speeds are read net of it (:func:`_net_of_grades`) before bends and lethal
-    neighbours are fitted. On rough
-    ground: for each band of :data:`ROUGH_BANDS_M`, the median speed of the frames on one column
-    alone, nearly straight, away from lethal terrain, slower than the terrain and grades ask
-    and past the band within :data:`ROUGH_PREVIEW_M`; where any explains the frames better than
-    none, the middle one of those that explain them as well as the best (:data:`ROUGH_ALIKE_MPS`)
-    is kept. A
+    What a degree of grade up sheds is the median, over the frames whose way is one column alone and
+    nearly straight, climbing past :data:`LEVEL_DEG` and nowhere going down past it, of the speed
+    they fall short of that column's cruising speed by per degree of their steepest grade up under
+    the footprint (down likewise); each is kept where it explains the frames better than none; on
+    relief the cruising speeds are read net of it (:func:`_net_of_grades`) before bends and lethal
+    neighbours are fitted. On rough ground: for each band of :data:`ROUGH_BANDS_M`, the median speed
+    of the frames on one column alone, nearly straight, away from lethal terrain, slower than the
+    terrain and grades ask and past the band within :data:`ROUGH_PREVIEW_M`; where any explains the
+    frames better than none, the middle one of those that explain them as well as the best
+    (:data:`ROUGH_ALIKE_MPS`) is kept. A
     class counts where it meets any one of the footprint's points (``min_points`` 1), as the
     driver reads its footprint: a model that asked for two passed at full speed the patches its
     driver brushes, on clean frames and under label errors alike, even where two points explained
@@ -322,7 +329,8 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
         best = fitted(best.lag_frames, best.model.preview_m, intervals=True)
         moving = np.isfinite(curvature) & (v_mps > 0)
         lateral = float(np.max(v_mps[moving] ** 2 * np.abs(curvature[moving]), initial=0.0))
-        best = replace(best, model=replace(best.model, drive_lateral_mps2=lateral if lateral > 0 else None))
+        across = grade is not None and grade.ndim == 3 and best.model.sheds_on_grades
+        best = replace(best, model=replace(best.model, drive_lateral_mps2=lateral if lateral > 0 else None, grades_across=across))
     return best
 
 
@@ -482,10 +490,11 @@ def _cruising(
 
 
 def steepest(grade: np.ndarray | None, upto: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The steepest grade up and down [deg, >= 0] (N,) on each way's first ``upto`` stations (0 where unknown)."""
+    """The steepest grade up and down [deg, >= 0] (N,) on each way's first ``upto`` stations,
+    on any of the points ``grade`` holds there (0 where unknown)."""
     if grade is None:
         return np.zeros(n), np.zeros(n)
-    g = np.nan_to_num(grade[:, :upto].astype(np.float64))
+    g = np.nan_to_num(grade[:, :upto].reshape(len(grade), -1).astype(np.float64))
     return np.maximum(g.max(axis=1, initial=0.0), 0.0), np.maximum(-g.min(axis=1, initial=0.0), 0.0)
 
 

@@ -87,6 +87,7 @@ SNAPSHOT_STEP_M = 0.2
 SNAPSHOT_X0, SNAPSHOT_Y0 = -1.0, 2.8
 SNAPSHOT_X, SNAPSHOT_Y = 40, 29
 CENTRE = 2  # the footprint point on the way's centre line (model.across)
+FOOT = 5  # the footprint's points (model.across): the grade is read on each
 
 
 @dataclass(frozen=True)
@@ -152,9 +153,10 @@ class SpeedReader(FrameReader):
     Arrays: ``way`` (N, STATIONS, 9) uint8 terrain columns along the way driven (module
     :mod:`.model`); ``curvature`` (N,) the command's curvature w / v (NaN where v = 0) [1/m];
     ``v_mps`` (N,) the speed commanded [m/s]; ``frame`` (N,) the frame's number in its recording;
-    ``grade`` (N, STATIONS) the grade of the way driven at each station, heading along it, as the
-    ground map's height layer then showed it [deg, positive up; NaN: unknown, all of it on flat
-    ground]; ``rough`` (N, STATIONS) the ground's roughness there, the same way [m]."""
+    ``grade`` (N, STATIONS, 5) the grade of the way driven at each station's footprint points,
+    heading along it, as the ground map's height layer then showed it [deg, positive up; NaN:
+    unknown, all of it on flat ground; datasets featurised before read the centre line alone,
+    (N, STATIONS)]; ``rough`` (N, STATIONS) the ground's roughness there, the same way [m]."""
 
     def __init__(self, half_width_m: float, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         terrain = TerrainColumns.of(featurizer.class_columns, featurizer.config.n_terrain, classes)
@@ -186,7 +188,7 @@ class SpeedReader(FrameReader):
         with np.errstate(divide="ignore", invalid="ignore"):
             curvature = np.where(v > 0, w / v, np.nan)
         way = np.full((len(keep), STATIONS, len(self.across)), self.k + 1, dtype=np.uint8)
-        grade = np.full((len(keep), STATIONS), np.nan, dtype=np.float32)
+        grade = np.full((len(keep), STATIONS, FOOT), np.nan, dtype=np.float32)
         rough = np.full((len(keep), STATIONS), np.nan, dtype=np.float32)
         step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
         gap = np.diff(keep) != 1  # frames not next to each other (left out, or another session): the way ends there
@@ -208,8 +210,11 @@ class SpeedReader(FrameReader):
             )
             i, k, inside = self._snapshot_cells(points, tuple(poses[j]))
             way[j, reach] = np.where(inside, self.snapshots[j, i, k], self.k + 1)
-            if self.gradients is not None:  # the body's pitch heading along the way, and the roughness, on its centre line
-                grade[j, reach] = body_grade(functools.partial(self._gradient_at, j, tuple(poses[j])), points[:, CENTRE], yaw)
+            if (
+                self.gradients is not None
+            ):  # the body's pitch heading along the way on each footprint point, the roughness on its centre line
+                gradient_at = functools.partial(self._gradient_at, j, tuple(poses[j]))
+                grade[j, reach] = body_grade(gradient_at, points[:, :FOOT].reshape(-1, 2), np.repeat(yaw, FOOT)).reshape(-1, FOOT)
                 centre = (i[:, CENTRE], k[:, CENTRE])
                 rough[j, reach] = np.where(inside[:, CENTRE], self.roughness[j][centre], np.nan)
         return {
@@ -313,7 +318,7 @@ class SpeedRule(Rule):
             "background": self.background,
         }
         if m.sheds_on_grades:  # a flat drive's model file is as it was before grades were learned
-            out |= {"up_mps_per_deg": m.up_mps_per_deg, "down_mps_per_deg": m.down_mps_per_deg}
+            out |= {"up_mps_per_deg": m.up_mps_per_deg, "down_mps_per_deg": m.down_mps_per_deg, "grades_across": m.grades_across}
         if m.slows_on_rough:  # and before rough ground was
             out |= {"rough_m": m.rough_m, "rough_mps": m.rough_mps}
         if self.fit is not None:
@@ -364,6 +369,7 @@ class SpeedRule(Rule):
             optional["down_mps_per_deg"],
             optional["rough_m"],
             optional["rough_mps"],
+            _grades_across(block, where),
         )
         fit = None
         intervals = block.get("intervals_mps")
@@ -461,6 +467,15 @@ class SpeedRule(Rule):
     def _classes(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[tuple[int, str]]:
         """(column, class) of every terrain column a speed is kept for: ``names``, then the background; not the lethal ones."""
         return [(col, name) for col, name in enumerate((*names, self.background)) if name not in lethal]
+
+
+def _grades_across(block: Mapping[str, Any], where: Where) -> bool:
+    """Whether a speed rule block's grades are read on each of the footprint's points (absent:
+    on the centre line, as files written before read them)."""
+    value = block.get("grades_across", False)
+    if not isinstance(value, bool):
+        raise where.error("grades_across", f"expected true or false, got {value!r}")
+    return value
 
 
 def _optional_fields(block: Mapping[str, Any], where: Where) -> dict[str, float | None]:
@@ -601,11 +616,11 @@ class LearnedSpeed(SpeedRunner):
         way = gmap.lookup(points, SPLIT)[None]
         grade = None
         if self.rule.model.sheds_on_grades:  # the body's pitch along the way, as the height layer shows the ground
-            read = gmap.body_grades(centre, heading, (CHORD_M, CHORD_WEIGHTS))
-            if attitude is not None:
-                self.grades.keep(centre, np.broadcast_to(heading, (len(centre),)), read)  # station 0 is checked at once
+            read = self._grades(gmap, centre, points, heading)
+            if attitude is not None:  # the centre line's grades checked against the body's pitch (station 0 at once)
+                self.grades.keep(centre, np.broadcast_to(heading, (len(centre),)), read[:, CENTRE] if read.ndim == 2 else read)
                 self.grades.arrived(x, y, yaw, math.degrees(attitude.grade_rad))
-                read = read - self.grades.correction
+                read = read - (self.grades.correction[:, None] if read.ndim == 2 else self.grades.correction)
             grade = read[None]
         rough = None
         if self.rule.model.slows_on_rough:  # the roughness on the way's first stations (model.roughest reads no further)
@@ -619,6 +634,16 @@ class LearnedSpeed(SpeedRunner):
             if self.rule.model.drive_lateral_mps2 is not None:  # never harder sideways than the drive went
                 top = min(top, math.sqrt(self.rule.model.drive_lateral_mps2 / abs(k)))
         return min(v, top)
+
+    def _grades(self, gmap: GroundMap, centre: np.ndarray, points: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """The body's pitch [deg] heading ``heading`` along the way, as ``gmap`` shows the ground: at
+        each footprint point of ``points`` (S, 9, 2) (S, 5) for a model that read its drive so,
+        else at each station's ``centre`` (S, 2) (S,)."""
+        heading = np.broadcast_to(heading, (len(centre),))
+        if not self.rule.model.grades_across:
+            return gmap.body_grades(centre, heading, (CHORD_M, CHORD_WEIGHTS))
+        read = gmap.body_grades(points[:, :FOOT].reshape(-1, 2), np.repeat(heading, FOOT), (CHORD_M, CHORD_WEIGHTS))
+        return read.reshape(-1, FOOT)
 
     def yaw_rate(self, curvature: float, v_mps: float, speed_mps: float | None = None) -> float:
         """The yaw rate [rad/s] that drives an arc of ``curvature`` [1/m] at the commanded ``v_mps``,
