@@ -514,6 +514,45 @@ def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
         raise UserError(source, "recording numbers must be >= 0", field="source")
 
 
+def _check_shapes(first: tuple[str, Dataset], other: tuple[str, Dataset]) -> None:
+    """A UserError naming ``other``'s file and array where a rule's array holds samples of
+    another shape than ``first``'s (read another way before: the speed rule's grade, once one a
+    station, now one a footprint point), unless either holds nothing known (all NaN: flat ground)."""
+    (first_name, a_set), (name, b_set) = first, other
+    for rule, arrays in a_set.rules.items():
+        for array, a in arrays.items():
+            b = b_set.rules.get(rule, {}).get(array)
+            if b is None or b.shape[1:] == a.shape[1:] or _unknown(a) or _unknown(b):
+                continue
+            raise UserError(
+                name,
+                f"holds {b.shape[1:]} a sample where {first_name} holds {a.shape[1:]}; featurise all recordings the same way",
+                field=f"rules.{rule}.{array}",
+            )
+
+
+def _unknown(a: np.ndarray) -> bool:
+    """Whether a floating array holds nothing known (all NaN)."""
+    return a.dtype.kind == "f" and not np.isfinite(a).any()
+
+
+def _widen_unknowns(sets: list[tuple[str, Dataset]]) -> list[tuple[str, Dataset]]:
+    """``sets`` with each rule array that holds nothing known (all NaN) in the shape the others
+    hold their samples in (:func:`_check_shapes` let them through), so that they concatenate."""
+    out = []
+    for name, d in sets:
+        rules = {}
+        for rule, arrays in d.rules.items():
+            rules[rule] = dict(arrays)
+            for array, a in arrays.items():
+                others = (o.rules.get(rule, {}).get(array) for _, o in sets)
+                known = [o for o in others if o is not None and not _unknown(o)]
+                if known and _unknown(a) and a.shape[1:] != known[0].shape[1:]:
+                    rules[rule][array] = np.full((len(a), *known[0].shape[1:]), np.nan, dtype=a.dtype)
+        out.append((name, replace(d, rules=rules)))
+    return out
+
+
 def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
     """One dataset from several (named by their files), which must share features, camera, classes
     and the order those that declare one declare; samples keep their order, and ``source`` numbers
@@ -525,9 +564,11 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
         for key in ("features", "camera", "classes", "rules"):
             if d.meta.get(key) != first.meta.get(key):
                 raise UserError(name, f"differs from {first_name} in {key}; featurise all recordings the same way", field=key)
+        _check_shapes((first_name, first), (name, d))
     profile = _declared_order([(name, name, d.meta) for name, d in sets], "featurise drives of one order together")
     if len(sets) == 1:
         return first
+    sets = _widen_unknowns(sets)
     # Each dataset's recordings are numbered after those of the datasets before it: by the
     # recordings it lists (a recording may have left no samples), else by its highest source.
     counts = [len(d.meta.get("recordings") or []) or (int(d.source.max()) + 1 if len(d) else 0) for _, d in sets[:-1]]

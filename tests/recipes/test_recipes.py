@@ -22,6 +22,7 @@ from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named, rul
 from terrapref.rules import OffsetConfig, SecondStageConfig, SpeedConfig
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.second.lookahead import LookaheadConfig
+from terrapref.rules.speed.model import STATIONS
 from terrapref.scenario import parse_scenario
 from terrapref.terrain import default_classes
 
@@ -428,3 +429,28 @@ def test_a_recorded_demonstration_of_another_course_is_recorded_again(tmp_path):
     record_demonstrations(recipe, tmp_path, setup, log=logged.append)
     assert read_recording(tmp_path / "tiny_course_1").meta["scenario"] == "tiny_course"
     assert len(logged) == 1 and logged[0].startswith(f"demonstration 2/2 ({TINY_COURSE})"), "run 0 reused, run 1 recorded again"
+
+
+def test_datasets_whose_rule_arrays_were_read_another_way_are_refused_naming_the_array():
+    """A relief drive featurised before the speed rule read its grades on the footprint's 5 points
+    holds a grade a station; one featurised now, five: they do not mix."""
+    a, b = _dataset(3, 1, 0), _dataset(3, 1, 1)
+    a.rules["speed"] = {"grade": np.zeros((3, STATIONS, 5), np.float32)}
+    b.rules["speed"] = {"grade": np.zeros((3, STATIONS), np.float32)}
+    with pytest.raises(UserError) as caught:
+        merge_datasets([("first.safetensors", a), ("second.safetensors", b)])
+    assert caught.value.lines() == [
+        "second.safetensors: rules.speed.grade: holds (24,) a sample where first.safetensors holds (24, 5); "
+        "featurise all recordings the same way"
+    ]
+
+
+def test_a_flat_drives_grades_merge_whichever_way_they_were_read():
+    """On flat ground the grade is unknown everywhere (NaN), read one a station or one a footprint
+    point: a flat drive featurised before joins one featurised now, its grades taken as unknown."""
+    a, b = _dataset(3, 1, 0), _dataset(2, 1, 1)
+    a.rules["speed"] = {"grade": np.ones((3, STATIONS, 5), np.float32)}
+    b.rules["speed"] = {"grade": np.full((2, STATIONS), np.nan, np.float32)}
+    merged = merge_datasets([("now.safetensors", a), ("before.safetensors", b)])
+    grade = merged.rules["speed"]["grade"]
+    assert grade.shape == (5, STATIONS, 5) and (grade[:3] == 1).all() and np.isnan(grade[3:]).all()

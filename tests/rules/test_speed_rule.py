@@ -29,6 +29,7 @@ from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.groundmap.map import GroundMap
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.train import FitData
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.rules import ArgmaxRule, HeaderContext, OffsetConfig, OffsetRule, RuleContext, chosen_rule, driving_rule, speed_rule
 from terrapref.rules.base import SPEED, STEERING, Where
@@ -39,6 +40,7 @@ from terrapref.scenario import AVOID, Scenario, parse_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.sim import Simulation, run_episode
 from terrapref.terrain import default_classes
+from terrapref.vehicle.ground import Attitude
 from terrapref.world import rasterise
 
 SOURCE = "speed-under-test"
@@ -182,6 +184,12 @@ def test_grades_on_the_footprints_points_shed_from_the_steepest_of_them():
     assert GRADED.predict(_way(), np.zeros(1), grade)[0] == pytest.approx(1.6 - 0.3)
     grade[0, 4, 1] = -20.0
     assert GRADED.predict(_way(), np.zeros(1), grade)[0] == pytest.approx(1.6 - 0.4)
+    # Each point sheds from its own class's speed: rock, level, on the other edge further on is slower.
+    level_rock = np.zeros((1, STATIONS, 5))
+    level_rock[0, 2, 4] = 10.0
+    assert GRADED.predict(_way((5, 4, ROCK)), np.zeros(1), level_rock)[0] == pytest.approx(0.8)
+    two = np.concatenate([level_rock, np.zeros((1, STATIONS, 5))])  # two ways at once, each its own grades
+    np.testing.assert_allclose(GRADED.predict(np.concatenate([_way(), _way()]), np.zeros(2), two), [1.6 - 0.3, 1.6])
 
 
 ROUGH = replace(MODEL, rough_m=0.02, rough_mps=0.8)
@@ -661,6 +669,9 @@ def test_the_ways_class_ids_survive_a_dataset_file_and_wider_integers_are_refuse
     with pytest.raises(UserError) as exc:  # beyond the 256 class ids a rule's tables read: refused, not an index error in the fit
         load_dataset(save_dataset(wide, tmp_path / "bad.safetensors"))
     assert exc.value.problems[0].field == "rules.speed.way"
+    odd = {**arrays, "grade": np.zeros((n, STATIONS, 7), np.float32)}  # neither a grade a station nor one a footprint point
+    with pytest.raises(UserError, match=r"grades of \(24, 7\) a sample; this version reads \(24, 5\)"):
+        SpeedConfig().fit(FitData(Dataset(U, labels, data.w, data.source, meta, {"speed": odd}), mirror=False))
 
 
 # --- 4. the runner on a ground map a tiny scenario fills ---------------------------------------------------
@@ -721,6 +732,22 @@ def test_the_runner_reads_the_way_of_the_arc_or_of_the_offset_held():
     assert runner.speed(seen, AT, 0.0, 1.0, (path, 6.0, 4.0)) == 0.9  # the path shifted 4 m left: on the mud
     assert runner.speed(seen, AT, 0.0, 1.0, (path, 6.0, 0.0)) == 1.6
     assert runner.speed(seen, AT, 0.0, 1.0, (path, 6.0, -4.0)) == 1.6
+
+
+def test_a_runner_that_learned_its_grades_across_the_footprint_reads_them_there(monkeypatch: pytest.MonkeyPatch):
+    """Ground that tilts across the way (here a grade rising 10 deg a metre to the left, read by
+    the map's body_grades): a model fitted on the footprint's points sheds what its left edge
+    (0.6 m) climbs, on the arc and on the offset held alike; one from an older file, on the centre
+    line, what the centre line climbs; the checks against the body's pitch read the centre line."""
+    runner, seen = _runner(replace(GRADED, grades_across=True), _scenario([]))
+    centre_line, _ = _runner(GRADED, _scenario([]))
+    path = ReferencePath(_scenario([]).waypoints)
+    monkeypatch.setattr(seen, "body_grades", lambda centre, heading, chord: 10.0 * (np.asarray(centre)[:, 1] - 10.0))
+    assert runner.speed(seen, AT, 0.0, 1.0) == pytest.approx(1.6 - 0.03 * 6.0)
+    assert runner.speed(seen, AT, 0.0, 1.0, (path, 6.0, 1.0)) == pytest.approx(1.6 - 0.03 * 16.0)  # 1 m left: its edge 1.6 m
+    assert centre_line.speed(seen, AT, 0.0, 1.0, (path, 6.0, 1.0)) == pytest.approx(1.6 - 0.03 * 10.0)
+    runner.speed(seen, AT, 0.0, 1.0, None, Attitude(0.0, 0.0, 0.0))  # level body, level centre line: nothing to correct
+    assert not runner.grades.correction.any()
 
 
 @pytest.mark.parametrize("curvature", [0.5, -0.5, 1.0])

@@ -329,8 +329,8 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
         best = fitted(best.lag_frames, best.model.preview_m, intervals=True)
         moving = np.isfinite(curvature) & (v_mps > 0)
         lateral = float(np.max(v_mps[moving] ** 2 * np.abs(curvature[moving]), initial=0.0))
-        across = grade is not None and grade.ndim == 3 and best.model.sheds_on_grades
-        best = replace(best, model=replace(best.model, drive_lateral_mps2=lateral if lateral > 0 else None, grades_across=across))
+        on_points = grade is not None and grade.ndim == 3 and best.model.sheds_on_grades
+        best = replace(best, model=replace(best.model, drive_lateral_mps2=lateral if lateral > 0 else None, grades_across=on_points))
     return best
 
 
@@ -494,7 +494,8 @@ def steepest(grade: np.ndarray | None, upto: int, n: int) -> tuple[np.ndarray, n
     on any of the points ``grade`` holds there (0 where unknown)."""
     if grade is None:
         return np.zeros(n), np.zeros(n)
-    g = np.nan_to_num(grade[:, :upto].reshape(len(grade), -1).astype(np.float64))
+    g = grade[:, :upto].astype(np.float64)
+    g = np.nan_to_num(g.reshape(len(g), int(np.prod(g.shape[1:]))))
     return np.maximum(g.max(axis=1, initial=0.0), 0.0), np.maximum(-g.min(axis=1, initial=0.0), 0.0)
 
 

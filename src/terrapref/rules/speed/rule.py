@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.errors import finite_number
+from terrapref.errors import UserError, finite_number
 from terrapref.features import UtilityFeaturizer
 from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.height import DepthImage
@@ -142,6 +142,11 @@ class SpeedConfig(RuleConfig):
         frame = arrays["frame"].astype(np.int64)
         grade, rough = (arrays.get(name) for name in ("grade", "rough"))  # absent from datasets featurised before they were read: flat
         grade, rough = (None if a is None or not np.isfinite(a).any() else a for a in (grade, rough))  # a drive on flat ground
+        if grade is not None and grade.shape[1:] not in ((STATIONS,), (STATIONS, FOOT)):
+            raise UserError(
+                "speed rule",
+                f"grades of {grade.shape[1:]} a sample; this version reads ({STATIONS}, {FOOT}), or ({STATIONS},) as read before",
+            )
         fitted = fit_speed(Drive(arrays["way"], arrays["curvature"], arrays["v_mps"], frame, grade, rough), features.n_terrain, lethal)
         return None if fitted is None else SpeedRule(config, fitted.model, fitted, table.background)
 
