@@ -161,7 +161,8 @@ class SpeedReader(FrameReader):
     ``grade`` (N, STATIONS, 5) the grade of the way driven at each station's footprint points,
     heading along it, as the ground map's height layer then showed it [deg, positive up; NaN:
     unknown, all of it on flat ground; datasets featurised before read the centre line alone,
-    (N, STATIONS)]; ``rough`` (N, STATIONS) the ground's roughness there, the same way [m]."""
+    (N, STATIONS)]; ``rough`` (N, STATIONS) the ground's roughness on the way's centre line, the
+    same way [m]."""
 
     def __init__(self, half_width_m: float, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         terrain = TerrainColumns.of(featurizer.class_columns, featurizer.config.n_terrain, classes)
@@ -215,9 +216,8 @@ class SpeedReader(FrameReader):
             )
             i, k, inside = self._snapshot_cells(points, tuple(poses[j]))
             way[j, reach] = np.where(inside, self.snapshots[j, i, k], self.k + 1)
-            if (
-                self.gradients is not None
-            ):  # the body's pitch heading along the way on each footprint point, the roughness on its centre line
+            # The body's pitch heading along the way on each footprint point, the roughness on its centre line.
+            if self.gradients is not None:
                 gradient_at = functools.partial(self._gradient_at, j, tuple(poses[j]))
                 grade[j, reach] = body_grade(gradient_at, points[:, :FOOT].reshape(-1, 2), np.repeat(yaw, FOOT)).reshape(-1, FOOT)
                 centre = (i[:, CENTRE], k[:, CENTRE])
