@@ -611,6 +611,9 @@ def test_a_block_with_what_grades_shed_reads_back_and_a_flat_drives_block_holds_
     assert [p.field for p in raised.value.problems] == ["rules[0].up_mps_per_deg"]
     across_rule = SpeedRule(SpeedConfig(), replace(GRADED, grades_across=True))
     assert _read(json.loads(json.dumps(across_rule.header()))).model.grades_across
+    centre_line = "grades read on the way's centre line"
+    assert any(x.startswith(centre_line) for x in back.lines(FEATURES.feature_classes, frozenset()))  # info says which
+    assert not any(x.startswith(centre_line) for x in across_rule.lines(FEATURES.feature_classes, frozenset()))
     older = {k: v for k, v in SpeedRule(SpeedConfig(), GRADED).header().items() if k != "grades_across"}
     assert not _read(older).model.grades_across  # a file from before read its grades on the centre line
     with pytest.raises(UserError) as raised:

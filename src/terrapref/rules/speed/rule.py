@@ -429,6 +429,10 @@ class SpeedRule(Rule):
         out.append(f"slows {m.preview_m:g} m before a slower class{points}")
         if m.sheds_on_grades or (fit is not None and fit.on_grades):
             out.append(f"grades: {self._grade_line(0, m.up_mps_per_deg, 'up')}; {self._grade_line(1, m.down_mps_per_deg, 'down')}")
+        if m.sheds_on_grades and not m.grades_across:
+            out.append(
+                "grades read on the way's centre line, as its drive was (a file from before they were read on the footprint's points)"
+            )
         if m.slows_on_rough or (fit is not None and fit.rough is not None):
             out.append(f"rough ground: {self._rough_line()}")
         bends = f"at most {m.lateral_accel_mps2:.2f} m/s^2 sideways" if m.lateral_accel_mps2 is not None else "no limit shown"
