@@ -443,7 +443,7 @@ def _net_of_grades(
         if not shedding.sheds_on_grades:
             return found
         # What it would take off each frame: its steepest station's shed (climb and descent as the model reads them).
-        shed = np.maximum((shedding.up_mps_per_deg or 0.0) * climb, (shedding.down_mps_per_deg or 0.0) * descent)
+        shed = np.maximum(shedding.shed(climb), shedding.shed(-descent))
         net = frames._replace(v=v + shed)
         speeds, _ = _cruising(net._replace(intervals=False), (alone, inside), near, level)
         again = replace(shedding, speeds_mps=_filled(speeds, v, frames.lethal))

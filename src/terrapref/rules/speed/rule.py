@@ -625,11 +625,11 @@ class LearnedSpeed(SpeedRunner):
         way = gmap.lookup(points, SPLIT)[None]
         grade = None
         if self.rule.model.sheds_on_grades:  # the body's pitch along the way, as the height layer shows the ground
-            read = self._grades(gmap, centre, points, heading)
+            read = self._grades(gmap, points, heading)
             if attitude is not None:  # the centre line's grades checked against the body's pitch (station 0 at once)
-                self.grades.keep(centre, np.broadcast_to(heading, (len(centre),)), read[:, CENTRE] if read.ndim == 2 else read)
+                self.grades.keep(centre, np.broadcast_to(heading, (len(centre),)), read[:, read.shape[1] // 2])
                 self.grades.arrived(x, y, yaw, math.degrees(attitude.grade_rad))
-                read = read - (self.grades.correction[:, None] if read.ndim == 2 else self.grades.correction)
+                read = read - self.grades.correction[:, None]
             grade = read[None]
         rough = None
         if self.rule.model.slows_on_rough:  # the roughness on the way's first stations (model.roughest reads no further)
@@ -644,15 +644,13 @@ class LearnedSpeed(SpeedRunner):
                 top = min(top, math.sqrt(self.rule.model.drive_lateral_mps2 / abs(k)))
         return min(v, top)
 
-    def _grades(self, gmap: GroundMap, centre: np.ndarray, points: np.ndarray, heading: np.ndarray) -> np.ndarray:
-        """The body's pitch [deg] heading ``heading`` along the way, as ``gmap`` shows the ground: at
-        each footprint point of ``points`` (S, 9, 2) (S, 5) for a model that read its drive so,
-        else at each station's ``centre`` (S, 2) (S,)."""
-        heading = np.broadcast_to(heading, (len(centre),))
-        if not self.rule.model.grades_across:
-            return gmap.body_grades(centre, heading, (CHORD_M, CHORD_WEIGHTS))
-        read = gmap.body_grades(points[:, :FOOT].reshape(-1, 2), np.repeat(heading, FOOT), (CHORD_M, CHORD_WEIGHTS))
-        return read.reshape(-1, FOOT)
+    def _grades(self, gmap: GroundMap, points: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """The body's pitch [deg] heading ``heading`` along the way, as ``gmap`` shows the ground, at
+        the points across ``points`` (S, 9, 2) the model read its drive on: (S, 5), each footprint
+        point, or (S, 1), the centre line alone (a model file from before)."""
+        on = points[:, :FOOT] if self.rule.model.grades_across else points[:, CENTRE : CENTRE + 1]
+        heading = np.repeat(np.broadcast_to(heading, (len(points),)), on.shape[1])
+        return gmap.body_grades(on.reshape(-1, 2), heading, (CHORD_M, CHORD_WEIGHTS)).reshape(len(points), on.shape[1])
 
     def yaw_rate(self, curvature: float, v_mps: float, speed_mps: float | None = None) -> float:
         """The yaw rate [rad/s] that drives an arc of ``curvature`` [1/m] at the commanded ``v_mps``,
