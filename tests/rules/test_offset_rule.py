@@ -834,14 +834,15 @@ def test_the_offset_rules_arrays_survive_a_dataset_file_and_bad_values_are_refus
 
 def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner_keeps_one_map(tmp_path):
     """Fitted on a drive whose frames carried depth (relief columns), the rule's map counts a cell
-    once it holds RELIEF_MIN_EVIDENCE, written in its file; fitted on flat ground it keeps the
-    geometry's own (0), as before. The speed rule reads the steering rule's map, so a planner with
+    once it holds RELIEF_MIN_EVIDENCE, and reads it as lethal once lethal classes hold
+    RELIEF_LETHAL_SHARE of it, both written in its file; fitted on flat ground it keeps the
+    geometry's own (0 and 0.35), as before. The speed rule reads the steering rule's map, so a planner with
     both keeps one map whatever the offset rule's map settings."""
     from test_speed_rule import MODEL as SPEED_MODEL
 
     from terrapref.learning.train import FitData
     from terrapref.rules.offset.features import RELIEF_BANDS_DEG
-    from terrapref.rules.offset.rule import RELIEF_MIN_EVIDENCE
+    from terrapref.rules.offset.rule import RELIEF_LETHAL_SHARE, RELIEF_MIN_EVIDENCE
     from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
 
     flat = _offset_dataset()
@@ -856,15 +857,19 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
         },
     }
     on_relief = Dataset(flat.U, flat.labels, flat.w, flat.source, meta, {"offset": {**arrays, "relief_m": relief_m}})
-    assert OffsetConfig().fit(FitData(flat, mirror=False)).config.geometry.map_min_evidence == 0.0
+    on_flat = OffsetConfig().fit(FitData(flat, mirror=False)).config.geometry
+    assert (on_flat.map_min_evidence, on_flat.map_lethal_share) == (0.0, 0.35)
     rule = OffsetConfig().fit(FitData(on_relief, mirror=False))
     assert RELIEF_MIN_EVIDENCE > 0 and rule.config.geometry.map_min_evidence == RELIEF_MIN_EVIDENCE
+    assert RELIEF_LETHAL_SHARE > 0.35 and rule.config.geometry.map_lethal_share == RELIEF_LETHAL_SHARE
     assert rule.header()["geometry"]["map_min_evidence"] == RELIEF_MIN_EVIDENCE
+    assert rule.header()["geometry"]["map_lethal_share"] == RELIEF_LETHAL_SHARE
     assert any(line.startswith("map: a cell counts as seen, lethal or not, once it holds 1 of evidence") for line in rule.relief_lines())
     meta = {**model_meta(), "rules": [rule.header(), SpeedRule(SpeedConfig(), SPEED_MODEL).header()], "drives": "offset"}
     config = ClassifierConfig(hidden=8, skip=True)
     planner = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)))
     assert planner.ground_map.settings.map_min_evidence == RELIEF_MIN_EVIDENCE
+    assert planner.ground_map.settings.map_lethal_share == RELIEF_LETHAL_SHARE
     assert planner.speed is not None and list(planner._maps.values()) == [planner.ground_map]  # offset, speed and stop: one map
 
 

@@ -101,6 +101,15 @@ if TYPE_CHECKING:
 # others (docs/lab/2026-12-01-relief-evidence.md); a rule fitted on flat ground keeps the
 # geometry's own (0), its decisions as they were.
 RELIEF_MIN_EVIDENCE = 1.0
+# The share of a cell's evidence lethal classes must hold for the cell to read as lethal, for a
+# rule fitted on relief (the map's own, terrapref.groundmap.MapSettings, is 0.35). Those blobs
+# of a lethal class, once near enough to count, made ground beside a patch lethal for a few
+# frames: the rule ruled out the side it held, swapped across the patch to the other, and swapped
+# back once the blob was outvoted, three times in two metres before one lone patch of mud. A true
+# lethal patch holds nearly all its cells' evidence. Chosen under `field` on generated relief
+# layouts and confirmed on others (docs/lab/2026-12-06-false-lethal-blobs.md); a rule fitted on
+# flat ground keeps the geometry's own, its decisions as they were.
+RELIEF_LETHAL_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -181,8 +190,12 @@ class OffsetConfig(RuleConfig):
                 f"the drive did not show what holding off the path costs (its weight came out {detour:+g}, not below 0): "
                 "its prices cannot be read; drive longer along a path kept, as a teaching course shows it (terrapref course)",
             )
-        if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view
-            geometry = replace(geometry, map_min_evidence=max(geometry.map_min_evidence, RELIEF_MIN_EVIDENCE))
+        if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view, and of most of it
+            geometry = replace(
+                geometry,
+                map_min_evidence=max(geometry.map_min_evidence, RELIEF_MIN_EVIDENCE),
+                map_lethal_share=max(geometry.map_lethal_share, RELIEF_LETHAL_SHARE),
+            )
         utility = OffsetUtility(
             fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval, fitted.hidden_on_path
         )
@@ -371,7 +384,8 @@ class OffsetRule(Rule):
             far, near = (math.ceil(g.map_min_evidence * (1.0 + (r / g.map_range_m) ** 2) - 1e-9) for r in (12.0, 4.0))
             lines.append(
                 f"map: a cell counts as seen, lethal or not, once it holds {g.map_min_evidence:g} of evidence "
-                f"(a vote at 0 m weighs 1: {far} votes at 12 m, {near} at 4 m)"
+                f"(a vote at 0 m weighs 1: {far} votes at 12 m, {near} at 4 m), and reads as lethal once lethal classes "
+                f"hold {g.map_lethal_share:.0%} of it"
             )
         return lines
 
