@@ -864,7 +864,10 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
     assert RELIEF_LETHAL_SHARE > 0.35 and rule.config.geometry.map_lethal_share == RELIEF_LETHAL_SHARE
     assert rule.header()["geometry"]["map_min_evidence"] == RELIEF_MIN_EVIDENCE
     assert rule.header()["geometry"]["map_lethal_share"] == RELIEF_LETHAL_SHARE
-    assert any(line.startswith("map: a cell counts as seen, lethal or not, once it holds 1 of evidence") for line in rule.relief_lines())
+    map_line = [
+        line for line in rule.relief_lines() if line.startswith("map: a cell counts as seen, lethal or not, once it holds 1 of evidence")
+    ]
+    assert len(map_line) == 1 and map_line[0].endswith("reads as lethal once lethal classes hold 50% of it")
     meta = {**model_meta(), "rules": [rule.header(), SpeedRule(SpeedConfig(), SPEED_MODEL).header()], "drives": "offset"}
     config = ClassifierConfig(hidden=8, skip=True)
     planner = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)))
