@@ -107,8 +107,8 @@ RELIEF_MIN_EVIDENCE = 1.0
 # frames: the rule ruled out the side it held, swapped across the patch to the other, and swapped
 # back once the blob was outvoted, three times in two metres before one lone patch of mud. A true
 # lethal patch holds nearly all its cells' evidence. Chosen under `field` on generated relief
-# layouts and confirmed on others (docs/lab/2026-12-06-false-lethal-blobs.md); a rule fitted on
-# flat ground keeps the geometry's own, its decisions as they were.
+# layouts and confirmed on others (docs/lab/2026-12-06-false-lethal-blobs.md); on flat layouts it
+# gained nothing, and a rule fitted on flat ground keeps the geometry's own, its decisions as they were.
 RELIEF_LETHAL_SHARE = 0.5
 
 
