@@ -597,8 +597,8 @@ class LearnedSpeed(SpeedRunner):
         the frame) shows it, within the rule's top speed and the speed at which an arc
         of ``curvature`` [1/m] needs no more than ``max_yaw_rate_rps``. With the body's ``attitude``
         (its odometry's; None: not known), a model that sheds speed on grades checks the grades it
-        read ahead against the body's pitch once there, and corrects what it reads by their errors
-        (terrapref.rules.speed.calibration).
+        read ahead against the body's pitch once there, and takes what it reads as those checks say
+        reads of that size turned out (terrapref.rules.speed.calibration).
 
         The way: with ``along`` (path, progress [m], offset [m]: a rule that holds an offset from
         the path), the footprint where the vehicle is, then the path shifted by the offset ahead
@@ -629,7 +629,7 @@ class LearnedSpeed(SpeedRunner):
             if attitude is not None:  # the centre line's grades checked against the body's pitch (station 0 at once)
                 self.grades.keep(centre, np.broadcast_to(heading, (len(centre),)), read[:, read.shape[1] // 2])
                 self.grades.arrived(x, y, yaw, math.degrees(attitude.grade_rad))
-                read = read - self.grades.correction[:, None]
+                read = self.grades.corrected(read)
             grade = read[None]
         rough = None
         if self.rule.model.slows_on_rough:  # the roughness on the way's first stations (model.roughest reads no further)
