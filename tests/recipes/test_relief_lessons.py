@@ -66,7 +66,8 @@ def test_a_follow_up_of_relief_alone_places_each_lessons_situation():
     course, items = follow_up_after(classes, [], ["teach_relief"], beside=Beside(relief=tuple(RELIEF_LESSONS)))
     assert items == list(RELIEF_LESSONS.values())
     scenario = parse_scenario(course.data(), "more.yaml", classes)
-    assert [type(e) for e in scenario.relief] == [Ridge, Mound, Plateau, Noise]  # a bank, a mound, a ramp, a rough patch
+    # a bank, a mound, a ramp, a rough patch in steps
+    assert [type(e) for e in scenario.relief] == [Ridge, Mound, Plateau, Noise, Noise, Noise, Noise]
     assert scenario.description.startswith(
         "Follow-up course: the relief the drive of teach_relief left unshown (steep side slope, steep grade, grades, rough ground)"
     )

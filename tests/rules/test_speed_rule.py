@@ -493,7 +493,8 @@ def test_rough_bands_within_a_millimetre_per_second_of_the_best_are_alike_and_th
     """As below, with the frames that see one spot a little rough (0.011 m) within a metre ahead a
     little slow: at 1.18 m/s the smoothest band explains them best by a hair (under 1 mm/s of mean
     error), so every band below 0.03 m still explains the drive alike and the middle one is kept,
-    not the smoothest; at 1.15 m/s it explains them better by more, and it alone is kept."""
+    not the smoothest; at 1.15 m/s the bands below 0.011 m explain them better by more, and the
+    middle of those is kept."""
     from terrapref.rules.speed.model import roughest
 
     track = _track()
@@ -511,8 +512,8 @@ def test_rough_bands_within_a_millimetre_per_second_of_the_best_are_alike_and_th
         fit = fit_speed(Drive(way, curvature, v, frame, None, rough), K, (LETHAL,))
         assert fit is not None and fit.lag_frames == 2 and fit.rough is not None
         kept[slow] = (fit.rough.alike_m, fit.model.rough_m)
-    assert kept[1.18] == ((0.01, 0.025), 0.0175)
-    assert kept[1.15] == ((0.01, 0.01), 0.01)
+    assert kept[1.18] == ((0.005, 0.025), 0.015)
+    assert kept[1.15] == ((0.005, 0.01), 0.0075)
 
 
 def test_the_fit_recovers_a_top_speed_on_rough_ground_and_says_which_roughness_it_cannot_tell():
@@ -530,17 +531,17 @@ def test_the_fit_recovers_a_top_speed_on_rough_ground_and_says_which_roughness_i
     assert fit is not None and fit.lag_frames == 2 and fit.error_mps == pytest.approx(0.0, abs=1e-6)
     m, shown = fit.model, fit.rough
     assert m.rough_mps == pytest.approx(0.8) and m.slows_on_rough and shown is not None and shown.frames >= 10
-    assert shown.alike_m == (0.01, 0.025) and m.rough_m == 0.0175  # the six bands below 0.03 m alike; the middle one kept
+    assert shown.alike_m == (0.005, 0.025) and m.rough_m == 0.015  # the eight bands below 0.03 m alike; the middle one kept
     low, high = shown.interval
     assert low - 1e-9 <= 0.8 <= high + 1e-9
     line = next(x for x in SpeedRule(SpeedConfig(), m, fit).lines(FEATURES.feature_classes, frozenset()) if x.startswith("rough"))
-    assert line.startswith("rough ground: at most 0.80 m/s where the ground within 1 m ahead is rougher than 0.0175 m (95% CI")
-    assert line.endswith("the drive cannot tell a roughness of 0.01-0.025 m from it")
+    assert line.startswith("rough ground: at most 0.80 m/s where the ground within 1 m ahead is rougher than 0.015 m (95% CI")
+    assert line.endswith("the drive cannot tell a roughness of 0.005-0.025 m from it")
     kept = fit_speed(Drive(*_drive(DRIVER, track), None, rough), K, (LETHAL,))
     assert kept is not None and not kept.model.slows_on_rough and kept.rough is not None and kept.rough.interval is None
     line = next(x for x in SpeedRule(SpeedConfig(), kept.model, kept).lines(FEATURES.feature_classes, frozenset()) if x.startswith("rough"))
     assert (
-        line == "rough ground: nothing learned (0 frames slower than terrain and grades ask, past 0.01 m within 1 m ahead: fewer than 10)"
+        line == "rough ground: nothing learned (0 frames slower than terrain and grades ask, past 0.005 m within 1 m ahead: fewer than 10)"
     )
 
 

@@ -342,6 +342,8 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
         RELIEF_DEG,
         RELIEF_HALF_M,
         RELIEF_KINDS,
+        ROUGH_LADDER_M,
+        ROUGH_PATCH_M,
         SLOPE_GAP_M,
         START_M,
         course_length,
@@ -395,9 +397,12 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
             assert (world.class_at(centre[along] + (BODY_M[0] + SLOPE_GAP_M + 0.1) * toward) == classes.id_of(item.classes[0])).all()
         elif item.kind == "ramp":  # the seed's gentle noise (0.1 m over 15 m) tilts it by up to a degree
             assert grade[leg].max() == pytest.approx(item.deg, abs=1.0)
-        elif item.kind == "rough":  # rougher than the default relief style slows past, with no step the vehicle cannot climb
-            middle = np.abs(s - mid) < 3.0
-            assert np.median(rough[middle]) > ReliefStyle().rough_m and step[leg].max() < 0.5 * VehicleConfig().max_step_m
+        elif item.kind == "rough":  # in steps from past the default style's roughness to half of it; no step too high
+            length, steps = ROUGH_PATCH_M[0], len(ROUGH_LADDER_M)
+            centres = mid - length / 2 + length / steps * (np.arange(steps) + 0.5)
+            medians = [np.median(rough[np.abs(s - c) < 0.5 * length / steps - 0.4]) for c in centres]
+            assert medians[0] > ReliefStyle().rough_m > 1.5 * medians[-1] and all(np.diff(medians) < 0), medians
+            assert step[leg].max() < 0.5 * VehicleConfig().max_step_m
         at += item.length_m
     # Three mounds, the gentle and the steep among the relief situations and one between them last,
     # each alone on its leg: grades at three steepnesses with no class in view.

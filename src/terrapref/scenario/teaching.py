@@ -21,7 +21,7 @@ relief situation alone and relief against terrain (:func:`relief_situations`): a
 path of a gentle and of a steep grade (and, last on the course, one of a grade between them: the
 three with no class in view, where the relief prices are fitted), a bank beside the path (the
 path on its flank) of a gentle and of a steep side slope, a ramp up and down across the way, a
-rough patch across the way (short noise: rocks and ruts), and each feature class as a flat patch beside the path against the path's
+rough patch across the way (short noise: rocks and ruts), rough at first and smoother step by step, and each feature class as a flat patch beside the path against the path's
 own ground sloping across the way as a bank of the background. Which of them a driver goes
 round, and how it slows on them, is its relief style. So that all of it fits in a drive of about
 7 minutes (:data:`RELIEF_BUDGET_M`: up to 3 feature classes and one lethal class), a course with
@@ -110,13 +110,19 @@ RELIEF_KINDS = ("mound", "bank", "ramp", "rough", "slope")  # the situations of 
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
 BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
 RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way: its top, each ramp, across [m]
-# A rough patch across the way: (length, width) [m], and its noise (amplitude [m], wavelength [m]):
-# the heights' deviation about their plane within 0.3 m (the roughness the planner reads) about
-# 0.019 m, past the default relief style's 0.015 m, its steps (the height range over 0.3 m, as the
-# planner's height layer reads a step) at most 0.09 m, well under the 0.15 m the vehicle climbs:
-# rougher patches read past that step where bumps hide the ground behind them, and stop the planner.
+# A rough patch across the way: (length, width) [m], and its noise's wavelength [m] and amplitude
+# [m] on each of its steps, in the order driven, each a quarter of its length: from about 0.019 m
+# rough (the heights' deviation about their plane within 0.3 m, the roughness the planner reads),
+# past the default relief style's 0.015 m, down to about 0.008 m. A driver slows on the roughest
+# and speeds up on the first step smooth enough for it, so the drive shows the roughness it slows
+# for, not only that it slows (with the roughest step alone, any roughness between it and smooth
+# ground explained the drive alike, and the planner slowed on rough patches less than its driver).
+# Its steps (the height range over 0.3 m, as the planner's height layer reads a step) at most
+# 0.09 m, well under the 0.15 m the vehicle climbs: rougher patches read past that step where
+# bumps hide the ground behind them, and stop the planner.
 ROUGH_PATCH_M = (8.0, 8.0)
-ROUGH_NOISE_M = (0.07, 0.3)
+ROUGH_WAVELENGTH_M = 0.3
+ROUGH_LADDER_M = (0.07, 0.057, 0.043, 0.03)
 SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
 # ... and the slope it leaves between itself and the footprint on the path [m]: a map cell and a
 # hand's wander, so that a footprint holding the path is on the slope alone (with none, the map's
@@ -303,7 +309,7 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
     each side): a mound's cosine profile of height h and radius R pitches it most, by
     ``atan(h sin(pi a / R) / (2 a))``, halfway out; a bank's (a ridge of width w) rolls it by
     ``atan(h sin(2 pi a / w) / (2 a))`` a quarter of its width from its line, where the path runs;
-    a ramp rises its height over its edge. A rough patch is level (:data:`ROUGH_NOISE_M`)."""
+    a ramp rises its height over its edge. A rough patch is level, its steps' noise each from a seed of its own (:data:`ROUGH_LADDER_M`)."""
     half_track, wheelbase = BODY_M
     tan = math.tan(math.radians(item.deg))
     if item.kind == "mound":
@@ -315,10 +321,12 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
         corners = c.to_world(s, [(-a, -b), (a, -b), (a, b), (-a, b)])
         c.relief.append({"plateau": {"polygon": corners, "height_m": round(tan * RAMP_EDGE_M, 3), "edge_m": RAMP_EDGE_M}})
     elif item.kind == "rough":
-        (length, width), (amplitude, wavelength) = ROUGH_PATCH_M, ROUGH_NOISE_M
-        a, b = length / 2, width / 2
-        corners = c.to_world(s, [(-a, -b), (a, -b), (a, b), (-a, b)])
-        c.relief.append({"noise": {"amplitude_m": amplitude, "wavelength_m": wavelength, "seed": 1, "polygon": corners}})
+        (length, width), steps = ROUGH_PATCH_M, len(ROUGH_LADDER_M)
+        b = width / 2
+        for k, amplitude in enumerate(ROUGH_LADDER_M):
+            a0, a1 = length * (k / steps - 0.5), length * ((k + 1) / steps - 0.5)
+            corners = c.to_world(s, [(a0, -b), (a1, -b), (a1, b), (a0, b)])
+            c.relief.append({"noise": {"amplitude_m": amplitude, "wavelength_m": ROUGH_WAVELENGTH_M, "seed": 1 + k, "polygon": corners}})
     else:  # a bank with the path on its flank: rising on the side of the offset, or across from a slope's patch
         side = math.copysign(1.0, item.offset_m) * (1.0 if item.kind == "bank" else -1.0)
         line = c.to_world(s, [(-BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4), (BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4)])
@@ -639,7 +647,7 @@ def write_teaching_course(folder: str | Path, classes: ClassTable, relief: bool 
 
 
 RELIEF_DESCRIPTION = (
-    "With relief: a gentle, a steep and, last, a middle mound on the path, a gentle and a steep bank beside it, a ramp up and down, a rough patch, "
+    "With relief: a gentle, a steep and, last, a middle mound on the path, a gentle and a steep bank beside it, a ramp up and down, a rough patch in steps, "
     "each feature class flat beside the path against a bank of the background, and bumps and dips between the situations."
 )
 

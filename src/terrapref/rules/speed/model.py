@@ -44,7 +44,8 @@ LEVEL_DEG = 3.0  # a way whose grade stays within this of level shows its class'
 # `field`, smooth ground 2-3 m ahead reads as rough as a patch of 0.01-0.02 m does at the vehicle),
 # while ground under the footprint has been seen from close by.
 ROUGH_PREVIEW_M = 1.0
-ROUGH_BANDS_M = (0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03, 0.035, 0.04)  # the roughness past which the fit tries a top speed [m]
+# The roughness past which the fit tries a top speed [m].
+ROUGH_BANDS_M = (0.005, 0.0075, 0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03, 0.035, 0.04)
 # Rough-ground bands whose speeds' mean error is within this of the best's explain a drive alike [m/s]:
 # the drive showed no ground between them, and the fit keeps the middle one, not the smoothest (which
 # slows on roughness the drive never showed, as a noisy map reads smooth ground) nor the roughest.
