@@ -117,7 +117,7 @@ RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way
 # and speeds up on the first step smooth enough for it, so the drive shows the roughness it slows
 # for, not only that it slows (with the roughest step alone, any roughness between it and smooth
 # ground explained the drive alike, and the planner slowed on rough patches less than its driver).
-# Its steps (the height range over 0.3 m, as the planner's height layer reads a step) at most
+# Its height steps (the height range over 0.3 m, as the planner's height layer reads a step) at most
 # 0.09 m, well under the 0.15 m the vehicle climbs: rougher patches read past that step where
 # bumps hide the ground behind them, and stop the planner.
 ROUGH_PATCH_M = (8.0, 8.0)
