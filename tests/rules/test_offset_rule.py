@@ -541,6 +541,31 @@ def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_letha
     assert _clearance(np.array(poses), (16.0, 10.0), (8.0, 2.5)) > 0.6
 
 
+def test_where_every_fitted_way_brushes_the_clearance_a_wider_one_that_keeps_it_is_held(camera):
+    # Trees 4.1 m across on the path, 2.3 m left of it and 1.8 m right, from 4 m ahead. The
+    # vehicle holds the outermost fitted offset on the left, 3 m: its footprint (0.6 m each side)
+    # passes 0.1 m from them, inside the clearance (0.3 m), and the way to every other fitted
+    # offset brushes them too. Beyond the fitted offsets on the same side, 3.4 m keeps the
+    # clearance: it is held until past, and the vehicle never comes nearer than the clearance.
+    trees = {"class": "non_traversable", "rectangle": {"center": [18.0, 10.25], "size": [8.0, 4.1]}}
+    scenario = _scenario([trees])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    pose = (10.0, 12.9, 0.0)
+    gmap = _map_of(stage, camera)
+    gmap.update(_seen_from(scenario, camera, pose), pose)
+    assert (stage._swept(gmap, stage.offsets, pose, path, 8.0) < stage._steps).all()  # every fitted way brushes the clearance
+    gmap.reset()
+    stage.held = 3.0
+    poses = []
+    while pose[0] < 23.0:  # until past the trees
+        s = path.project(np.array(pose[:2]))[0]
+        w = _steer(stage, gmap, _seen_from(scenario, camera, pose), pose, path, s)
+        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
+        poses.append(pose)
+    assert _clearance(np.array(poses), (18.0, 10.25), (8.0, 4.1)) > 0.6 + 0.3 - 0.05  # the clearance, less a map cell
+
+
 def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera):
     # A slanted non_traversable strip across the whole corridor, nearer on the left: the footprint
     # meets it on the way to every offset, and the ways to the right run farthest before it.

@@ -9,7 +9,12 @@ candidate offset d. The rule then:
    near the offsets' ways (the class table says which classes are lethal; that is not learned); when
    that rules out every offset, checks again with the footprint alone, without the margin, and
    keeps the offsets whose way is clear of it; when none is, those whose way runs farthest
-   before lethal terrain;
+   before lethal terrain; but first, when every way brushes the clearance, it looks beyond the
+   fitted offsets on the side of the offset held (the escape offsets of step 4) for the nearest
+   whose line and way keep the clearance, and holds that one while the fitted ways still brush
+   it: the clearance is what absorbs the error in the robot's pose, and under the ``field``
+   preset a way held inside it, the outermost fitted offset beside a lethal strip, brushed the
+   strip's corner;
 2. goes back to the path while nothing lies on it within the utility's near distance, unless
    the way back is ruled out (then it takes the best offset that is not);
 3. otherwise keeps the offset it holds while that offset's utility falls short of the best one's
@@ -125,8 +130,8 @@ class OffsetConfig(RuleConfig):
         lethal_horizon_m: how far ahead the way to each offset is checked for lethal terrain [m].
         dt_s: time step of that check [s].
         escape_factor: escape offsets, used only when lethal terrain lies across every fitted
-            offset as far as the features read, reach this many times as far as the fitted
-            offsets do (1 = no escape).
+            offset as far as the features read or the way to every one brushes the clearance,
+            reach this many times as far as the fitted offsets do (1 = no escape).
         geometry: the candidate offsets, the stations read along the path and the ground map.
     """
 
@@ -586,9 +591,11 @@ class OffsetSteering(SteeringRunner):
                     escape = self._escape(gmap, value, path, progress_m)
                 if len(self._line_stations) <= far.shape[1]:
                     lines = far[:, : len(self._line_stations)].any(axis=1)  # the same stations, from the same start and step
-            blocked = self._blocked(gmap, self.offsets, pose, path, progress_m, lines)
+            blocked, brushed = self._ruled_out(gmap, self.offsets, pose, path, progress_m, lines)
             if not blocked.all():
                 value = np.where(blocked, -np.inf, value)
+            if escape is None and brushed:
+                escape = self._wider(gmap, value, pose, path, progress_m)
         best = int(np.argmax(value))
         held = int(np.argmin(np.abs(self.offsets - self.held)))
         if escape is not None:
@@ -645,10 +652,31 @@ class OffsetSteering(SteeringRunner):
         order = np.lexsort((-side, np.abs(self.escapes), across))  # the held side, nearest, then the preferred side
         return float(self.escapes[order[np.argmax(clear[order])]])
 
+    def _wider(self, gmap: GroundMap, value: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float) -> float | None:
+        """The escape offset to hold when the way to every fitted offset brushes the clearance
+        (step 1 of the module docstring): the nearest, on the side of the offset held (holding
+        none, of the best offset ``value`` leaves), whose line and way keep the clearance; None
+        where none does."""
+        side = np.sign(self.held if self.held != 0.0 else self.offsets[int(np.argmax(value))])
+        wider = self.escapes[np.sign(self.escapes) == side]
+        if wider.size == 0:
+            return None
+        wider = wider[np.argsort(np.abs(wider))]
+        keep = ~self._lines(gmap, wider, path, progress_m, self._line_stations)
+        keep[keep] = self._swept(gmap, wider[keep], pose, path, progress_m) == self._steps
+        return float(wider[np.argmax(keep)]) if keep.any() else None
+
     def _blocked(
         self, gmap: GroundMap, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, lines: np.ndarray | None = None
     ) -> np.ndarray:
-        """Which of ``offsets`` (O,) lethal terrain rules out (on ``gmap``).
+        """Which of ``offsets`` (O,) lethal terrain rules out (on ``gmap``): :meth:`_ruled_out`'s first part."""
+        return self._ruled_out(gmap, offsets, pose, path, progress_m, lines)[0]
+
+    def _ruled_out(
+        self, gmap: GroundMap, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, lines: np.ndarray | None = None
+    ) -> tuple[np.ndarray, bool]:
+        """Which of ``offsets`` (O,) lethal terrain rules out (on ``gmap``), and whether the way to
+        every one of them brushes the clearance.
 
         First each offset's line parallel to the path, from 0.5 m behind to the horizon, with the
         footprint and its clearance (``lines``, when already read). Where some line meets lethal
@@ -666,18 +694,18 @@ class OffsetSteering(SteeringRunner):
         if lines is None:
             lines = self._lines(gmap, offsets, path, progress_m, self._line_stations)
         if not lines.any():
-            return lines
+            return lines, False
         reach = self._swept(gmap, offsets, pose, path, progress_m)
         both = lines | (reach < self._steps)
         if not both.all():
-            return both
+            return both, False
         reach = self._swept(gmap, offsets, pose, path, progress_m, self._bare)
         keep = ~self._lines(gmap, offsets, path, progress_m, self._line_stations, self._bare) & (reach == self._steps)
         if not keep.any():
             side = np.sign(offsets) == np.sign(self.held) if self.held != 0.0 else np.ones(len(offsets), bool)
             side = side if side.any() else np.ones(len(offsets), bool)
             keep = side & (reach == reach[side].max())
-        return ~(keep & ~lines if (keep & ~lines).any() else keep)
+        return ~(keep & ~lines if (keep & ~lines).any() else keep), True
 
     def _lines(
         self,
