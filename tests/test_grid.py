@@ -248,9 +248,12 @@ def test_a_killed_commands_workers_end_with_it(tmp_path):
             time.sleep(0.05)
         proc.send_signal(signal.SIGKILL)
     assert len(workers) == 2
-    time.sleep(2.0)  # past the jobs' end, had they gone on
-    assert not any(Path(mark).exists() for mark in marks)
+    for _ in range(200):  # ended, they write nothing more: waited for up to 10 s, past the jobs' end had they gone on
+        if not any(_running(pid) for pid in workers):
+            break
+        time.sleep(0.05)
     assert not any(_running(pid) for pid in workers)
+    assert not any(Path(mark).exists() for mark in marks)
 
 
 def _running(pid: int) -> bool:

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
-IDLE_FRAMES = 10  # the first of them, that `terrapref play` publishes to the node that waited (at a quarter of real time)
+IDLE_FRAMES = 6  # the first of them, that `terrapref play` publishes to the node that waited (at a quarter of real time)
 LOOPBACK = (
     '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
     "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
@@ -59,16 +59,15 @@ def _domains() -> tuple[int, int]:
     from cyclonedds.domain import DomainParticipant
 
     quiet, start = [], os.getpid() % 200
-    for k in range(200):
-        domain = 20 + (start + k) % 200
-        dp = DomainParticipant(domain)
-        reader = BuiltinDataReader(dp, BuiltinTopicDcpsParticipant)
+    for k in range(0, 200, 2):  # two domains listened to at once
+        domains = [20 + (start + k + i) % 200 for i in range(2)]
+        listeners = [(dp, BuiltinDataReader(dp, BuiltinTopicDcpsParticipant)) for dp in map(DomainParticipant, domains)]
         time.sleep(0.3)  # a participant there announces itself within this on loopback
-        others = [p for p in reader.take(N=20) if p.key != dp.get_guid()]
-        del reader, dp
-        if not others:
-            quiet.append(domain)
-        if len(quiet) == 2:
+        for domain, (dp, reader) in zip(domains, listeners, strict=True):
+            if not [p for p in reader.take(N=20) if p.key != dp.get_guid()]:
+                quiet.append(domain)
+        del listeners
+        if len(quiet) >= 2:
             return quiet[0], quiet[1]
     raise AssertionError("no quiet DDS domain")
 
