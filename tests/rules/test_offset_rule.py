@@ -515,30 +515,41 @@ def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera)
     assert stage.held == 0.0  # with nothing there it goes back
 
 
+def _driven_past(scenario, camera: PinholeCamera, pose, held: float, until_x: float, each=None) -> np.ndarray:
+    """The poses a fresh rule drives at 1 m/s from ``pose`` on the test path (which starts at
+    x = 2 m), holding ``held`` at first, until past ``until_x`` [m]; ``each`` is called with the
+    rule after every step. Where it starts, the way to every fitted offset brushes the clearance
+    (checked on the view from there)."""
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    gmap = _map_of(stage, camera)
+    gmap.update(_seen_from(scenario, camera, pose), pose)
+    assert (stage._swept(gmap, stage.offsets, pose, path, pose[0] - 2.0) < stage._steps).all()  # every way brushes the clearance
+    gmap.reset()
+    stage.held = held
+    poses = []
+    while pose[0] < until_x:
+        s = path.project(np.array(pose[:2]))[0]
+        w = _steer(stage, gmap, _seen_from(scenario, camera, pose), pose, path, s)
+        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
+        poses.append(pose)
+        if each is not None:
+            each(stage)
+    return np.array(poses)
+
+
 def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_lethal_terrain(camera):
     # Trees on the path, 2.5 m across (1.25 m each side), from 1.5 m ahead. The vehicle is 1.8 m
     # left of the path: its footprint (0.6 m each side) passes them, its clearance (0.9 m) does
     # not, so the way to every offset brushes the clearance. The ways to the right offsets touch
     # it later (only once they are across), which is no reason to cross the trees.
     trees = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [8.0, 2.5]}}
-    scenario = _scenario([trees])
-    path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
-    pose = (10.5, 11.8, 0.0)
-    gmap = _map_of(stage, camera)
-    gmap.update(_seen_from(scenario, camera, pose), pose)
-    assert (stage._swept(gmap, stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
-    stage.reset()
-    gmap.reset()
-    stage.held = 2.8
-    poses = []
-    while pose[0] < 20.0:  # until past the trees
-        s = path.project(np.array(pose[:2]))[0]
-        w = _steer(stage, gmap, _seen_from(scenario, camera, pose), pose, path, s)
-        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
-        poses.append(pose)
+
+    def never_across(stage: OffsetSteering) -> None:
         assert stage.held > 0.0  # never the way across
-    assert _clearance(np.array(poses), (16.0, 10.0), (8.0, 2.5)) > 0.6
+
+    poses = _driven_past(_scenario([trees]), camera, (10.5, 11.8, 0.0), 2.8, 20.0, never_across)
+    assert _clearance(poses, (16.0, 10.0), (8.0, 2.5)) > 0.6
 
 
 def test_where_every_fitted_way_brushes_the_clearance_a_wider_one_that_keeps_it_is_held(camera):
@@ -548,22 +559,8 @@ def test_where_every_fitted_way_brushes_the_clearance_a_wider_one_that_keeps_it_
     # offset brushes them too. Beyond the fitted offsets on the same side, 3.4 m keeps the
     # clearance: it is held until past, and the vehicle never comes nearer than the clearance.
     trees = {"class": "non_traversable", "rectangle": {"center": [18.0, 10.25], "size": [8.0, 4.1]}}
-    scenario = _scenario([trees])
-    path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
-    pose = (10.0, 12.9, 0.0)
-    gmap = _map_of(stage, camera)
-    gmap.update(_seen_from(scenario, camera, pose), pose)
-    assert (stage._swept(gmap, stage.offsets, pose, path, 8.0) < stage._steps).all()  # every fitted way brushes the clearance
-    gmap.reset()
-    stage.held = 3.0
-    poses = []
-    while pose[0] < 23.0:  # until past the trees
-        s = path.project(np.array(pose[:2]))[0]
-        w = _steer(stage, gmap, _seen_from(scenario, camera, pose), pose, path, s)
-        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
-        poses.append(pose)
-    assert _clearance(np.array(poses), (18.0, 10.25), (8.0, 4.1)) > 0.6 + 0.3 - 0.05  # the clearance, less a map cell
+    poses = _driven_past(_scenario([trees]), camera, (10.0, 12.9, 0.0), 3.0, 23.0)
+    assert _clearance(poses, (18.0, 10.25), (8.0, 4.1)) > 0.6 + 0.3 - 0.05  # the clearance, less a map cell
 
 
 def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera):
@@ -584,7 +581,7 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
     assert stage.offsets[np.argmax(reach)] < 0.0  # the farthest way is on the right
     for held, side in ((1.0, 1.0), (-1.0, -1.0), (0.0, -1.0)):
         stage.held = held
-        kept = stage.offsets[~stage._blocked(gmap, stage.offsets, pose, path, 8.5)]
+        kept = stage.offsets[~stage._ruled_out(gmap, stage.offsets, pose, path, 8.5)[0]]
         assert kept.size > 0 and (np.sign(kept) == side).all(), (held, kept)
 
 

@@ -666,12 +666,6 @@ class OffsetSteering(SteeringRunner):
         keep[keep] = self._swept(gmap, wider[keep], pose, path, progress_m) == self._steps
         return float(wider[np.argmax(keep)]) if keep.any() else None
 
-    def _blocked(
-        self, gmap: GroundMap, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, lines: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Which of ``offsets`` (O,) lethal terrain rules out (on ``gmap``): :meth:`_ruled_out`'s first part."""
-        return self._ruled_out(gmap, offsets, pose, path, progress_m, lines)[0]
-
     def _ruled_out(
         self, gmap: GroundMap, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, lines: np.ndarray | None = None
     ) -> tuple[np.ndarray, bool]:
