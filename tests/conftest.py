@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import shutil
@@ -189,3 +190,11 @@ WAITING_FIRST = ("tests/interop/test_ros2.py", "tests/interop/test_ros1.py")
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     items.sort(key=lambda item: not item.nodeid.startswith(WAITING_FIRST))  # a stable sort: the rest keep their order
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Collected, the test modules and what they import (NumPy, PyTorch, Matplotlib, the package)
+    are loaded for good: their objects are frozen out of the garbage collector's reach, so that
+    each full collection during the run (and pytest's at its end) does not walk them again."""
+    gc.collect()
+    gc.freeze()

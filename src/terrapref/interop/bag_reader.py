@@ -10,6 +10,7 @@ failure of the reader a one-line UserError.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -36,54 +37,64 @@ def open_reader(path: Path):
     definitions at all."""
     with needs("robot", "reading ROS bags"):
         from rosbags.highlevel import AnyReader
-        from rosbags.interfaces import MessageDefinitionFormat
-        from rosbags.typesys import Stores, get_typestore
 
     class TolerantReader(AnyReader):
         def _open(self) -> None:
             for reader in self.readers:
                 self.stack.enter_context(reader)
             connections = [c for reader in self.readers for c in reader.connections]
-            defined = any(c.msgdef.format != MessageDefinitionFormat.NONE for c in connections)
-            types = {} if defined else dict(self.default_typestore.fielddefs)
-            self.unreadable, self.connections = {}, []
-            for connection in connections:
-                try:
-                    own = _definition_types(connection)
-                    if own and connection.digest:  # a definition and its hash: checked against each other
-                        trial = get_typestore(Stores.EMPTY)
-                        trial.register({**types, **own})
-                        digest = trial.hash_rihs01(connection.msgtype) if self.is2 else trial.generate_msgdef(connection.msgtype)[1]
-                        if digest != connection.digest:
-                            raise ValueError("its hash does not match its definition")
-                except Exception as exc:  # the type system's errors vary with the definition's flaw
-                    self.unreadable[connection.topic] = (connection.msgtype, one_line(exc, 80))
-                    continue
-                types.update(own)
-                self.connections.append(connection)
-            self.typestore = get_typestore(Stores.EMPTY)
-            self.typestore.register(types)
+            definitions = tuple((c.msgtype, c.msgdef.format, c.msgdef.data, c.digest) for c in connections)
+            self.typestore, flaws = _checked_types(definitions, self.is2)
+            self.unreadable = {c.topic: (c.msgtype, flaw) for c, flaw in zip(connections, flaws) if flaw is not None}
+            self.connections = [c for c, flaw in zip(connections, flaws) if flaw is None]
 
-    reader = TolerantReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    reader = TolerantReader([path])
     reader.open()
     return reader
 
 
-def _definition_types(connection) -> dict:
-    """The message types a connection's own definition declares (none when it carries none)."""
+@functools.lru_cache(maxsize=8)
+def _checked_types(definitions: tuple, is2: bool):
+    """The typestore of a log's connections, given as (message type, definition format, definition,
+    hash) each, and each connection's flaw (None where it is readable): a definition that cannot be
+    parsed, or whose hash does not match it. A log without definitions is read with the ROS 2
+    Humble types. Kept for the logs opened next (one drive's logs carry the same definitions), so
+    that the store's serialisers are generated once: shared, it is only read."""
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.typesys import Stores, get_typestore
+
+    defined = any(fmt != MessageDefinitionFormat.NONE for _, fmt, _, _ in definitions)
+    types = {} if defined else dict(get_typestore(Stores.ROS2_HUMBLE).fielddefs)
+    flaws: list[str | None] = []
+    for msgtype, fmt, data, digest in definitions:
+        try:
+            own = _definition_types(msgtype, fmt, data)
+            if own and digest:  # a definition and its hash: checked against each other
+                trial = get_typestore(Stores.EMPTY)
+                trial.register({**types, **own})
+                if digest != (trial.hash_rihs01(msgtype) if is2 else trial.generate_msgdef(msgtype)[1]):
+                    raise ValueError("its hash does not match its definition")
+        except Exception as exc:  # the type system's errors vary with the definition's flaw
+            flaws.append(one_line(exc, 80))
+            continue
+        types.update(own)
+        flaws.append(None)
+    store = get_typestore(Stores.EMPTY)
+    store.register(types)
+    return store, tuple(flaws)
+
+
+def _definition_types(msgtype: str, fmt, data: str) -> dict:
+    """The message types a connection's own definition (its format ``fmt`` and text ``data``)
+    declares (none when it carries none)."""
     from rosbags.interfaces import MessageDefinitionFormat
     from rosbags.typesys import get_types_from_idl, get_types_from_msg
 
-    definition = connection.msgdef
-    if definition.format == MessageDefinitionFormat.MSG:
-        return get_types_from_msg(definition.data, connection.msgtype)
-    if definition.format == MessageDefinitionFormat.IDL:
+    if fmt == MessageDefinitionFormat.MSG:
+        return get_types_from_msg(data, msgtype)
+    if fmt == MessageDefinitionFormat.IDL:
         sep = "=" * 80 + "\n"
-        parts = (
-            [p.split("\n", 1)[1] for p in definition.data.split(sep)[1:]]
-            if definition.data.startswith(f"{sep}IDL: ")
-            else [definition.data]
-        )
+        parts = [p.split("\n", 1)[1] for p in data.split(sep)[1:]] if data.startswith(f"{sep}IDL: ") else [data]
         types: dict = {}
         for idl in parts:
             types.update(get_types_from_idl(idl))

@@ -10,6 +10,7 @@ The other direction, ROS messages decoded into terrapref's data, is :mod:`terrap
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 from collections.abc import Iterable
@@ -48,8 +49,11 @@ _NUMERIC = {
 }
 
 
+@functools.cache
 def typestore(ros1: bool = False) -> Typestore:
-    """ROS 1 Noetic's or ROS 2 Humble's message types, tf2_msgs/TFMessage among them."""
+    """ROS 1 Noetic's or ROS 2 Humble's message types, tf2_msgs/TFMessage among them: one store
+    a process, shared (read it, register nothing into it), so that each type's serialisers are
+    generated once, not at every export, import or node start (about 0.1 s each time)."""
     with needs("robot", "ROS messages"):
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
