@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
+SILENT_S = 1.5  # the idle node's -p silent_s: it says nobody publishes this long after its start (not the default 5 s)
 IDLE_FRAMES = 6  # the first of them, that `terrapref play` publishes to the node that waited (at a quarter of real time)
 LOOPBACK = (
     '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
@@ -237,7 +238,11 @@ def system(tmp_path_factory, short_recording):
     driven, idle_domain = _domains()
     env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK, "TERRAPREF_DEBUG": ""}
     idle_node = _node(
-        model, robot, {**env, "ROS_DOMAIN_ID": str(idle_domain)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", sigint_ignored=True
+        model,
+        robot,
+        {**env, "ROS_DOMAIN_ID": str(idle_domain)},
+        *("-p", "use_sim_time:=true", "-p", "stamped:=true", "-p", f"silent_s:={SILENT_S}"),
+        sigint_ignored=True,
     )
     idle_log: list[str] = []  # read as it comes: the node says it waits, then play starts
     idle_reader = threading.Thread(target=lambda: idle_log.extend(idle_node.stderr), daemon=True)
@@ -273,7 +278,7 @@ def system(tmp_path_factory, short_recording):
         try:
             idle_heard, idle_listener = _Heard(), Participant(idle_domain, MessageTypes(typestore()))
             readers = _listen(idle_listener, idle_heard)
-            # From the start of both nodes: the idle one says so once it has heard nobody for 5 s.
+            # From the start of both nodes: the idle one says so once it has heard nobody for SILENT_S.
             _wait(lambda: all(r.get_matched_publications() for r in readers), timeout_s=60.0, what="the idle node's publications")
             _wait(
                 lambda: any("/clock: no publisher" in line for line in idle_log),
@@ -526,7 +531,7 @@ def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     code, stdout, stderr = system["idle"]
     assert code == 0, stderr[-2000:]
     for topic in ("/terrapref/labels", "/terrapref/depth", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path", "/clock"):
-        assert sum(f"{topic}: no publisher of" in line for line in stderr.splitlines()) == 1, stderr
+        assert sum(f"{topic}: no publisher of" in line and f"after {SILENT_S:g} s" in line for line in stderr.splitlines()) == 1, stderr
     heard = system["idle_heard"]
     assert heard.get("costmap")
     # Each decision's markers, stamped with its frame's time in the log: the frame, and the trajectory drawn as chosen.
@@ -658,6 +663,8 @@ def test_ros_args_set_parameters_and_remap_names():
             "stamped:=true",
             "-p",
             "use_sim_time:=true",
+            "-p",
+            "silent_s:=20",
             "-r",
             "__ns:=/robot",
             "-r",
@@ -667,7 +674,8 @@ def test_ros_args_set_parameters_and_remap_names():
         ]
     )
     opts = NodeOptions().resolved(args.get_param, param=lambda name: f"-p {name}")
-    assert (opts.rate, opts.stamped, args.use_sim_time) == (10, True, True)
+    assert (opts.rate, opts.stamped, args.use_sim_time, args.silent_s) == (10, True, True, 20.0)
+    assert RosArgs.parse([]).silent_s == 5.0
     names = Names(args.remaps)
     assert names.fqn == "/robot/terrapref"
     assert names.resolve("~/trajectories") == "/robot/terrapref/trajectories"
@@ -686,6 +694,8 @@ def test_ros_args_set_parameters_and_remap_names():
     "argv, env, words",
     [
         (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "rate:=0"], {}, ["-p rate", "(0, 200]"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "silent_s:=0"], {}, ["-p silent_s", "(0, 600]"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "silent_s:=.nan"], {}, ["-p silent_s", "(0, 600]"]),
         (["ros2", "--model", "M", "--robot", "R"], {"ROS_DOMAIN_ID": "999"}, ["ROS_DOMAIN_ID", "[0, 232]"]),
         (["play", "nowhere.mcap"], {}, ["nowhere.mcap", "no such file"]),
         (["play", "drive.bag"], {}, ["ROS 1 bag", "rosbag play"]),

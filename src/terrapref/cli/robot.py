@@ -96,7 +96,7 @@ def ros2_parser(sub: argparse._SubParsersAction) -> None:
         "--ros-args",
         nargs=argparse.REMAINDER,
         metavar="ARG",
-        help="ROS 2's arguments, last: -p NAME:=VALUE (stamped, rate, path_file, cmd_topic, hold_s, use_sim_time; the robot's "
+        help="ROS 2's arguments, last: -p NAME:=VALUE (stamped, rate, path_file, cmd_topic, hold_s, watchdog_s, use_sim_time, silent_s; the robot's "
         "limits; the rules' settings as RULE.NAME, e.g. offset.switch_margin, docs/robot.md) and "
         "-r FROM:=TO (topics; __node, __ns); ROS_DOMAIN_ID picks the domain",
     )

@@ -24,6 +24,7 @@ player died) would otherwise hold the last command for ever.
 from __future__ import annotations
 
 import contextlib
+import math
 import re
 import signal
 import sys
@@ -55,13 +56,14 @@ from terrapref.interop.ros_decode import time_s
 
 NODE_NAME = "terrapref"
 COSTMAP_PERIOD_S = 1.0  # between two costmaps [s]
-SILENT_AFTER_S = 5.0  # an input topic without a publisher this long after the start is said [s]
+SILENT_S = 5.0  # an input topic without a publisher this long after the start is said [s] (default of -p silent_s)
+SILENT_TOP_S = 600.0  # the longest silent_s may be [s]
 MARKER_LIFETIME_S = 0.5
 STOP_DELIVERY_S = 1.0  # the longest the node waits, as it ends, for its last stop command to reach the base [s]
 MOUNT_FRAMES = ("terrapref_camera_link", "terrapref_camera_optical")  # the node's own names: never a second parent in the robot's tree
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
-PARAMETERS = ("stamped", "rate", "path_file", "cmd_topic", "hold_s", "watchdog_s", *ROBOT_PARAMETERS, "use_sim_time")
+PARAMETERS = ("stamped", "rate", "path_file", "cmd_topic", "hold_s", "watchdog_s", *ROBOT_PARAMETERS, "use_sim_time", "silent_s")
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,14 @@ class RosArgs:
         if not isinstance(value, bool):
             raise UserError("-p use_sim_time", f"expected true or false, got {value!r}")
         return value
+
+    @property
+    def silent_s(self) -> float:
+        """How long after its start the node says which of its inputs nobody publishes [s]."""
+        value = self.params.get("silent_s", SILENT_S)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and 0 < value <= SILENT_TOP_S):
+            raise UserError("-p silent_s", f"expected a number in (0, {SILENT_TOP_S:g}], got {value!r}")
+        return float(value)
 
 
 def _param_value(text: str) -> Any:
@@ -232,7 +242,7 @@ def run_node(
     names = Names(args.remaps)
     opts = (options or NodeOptions()).with_rule_params(args.rule_params, "--ros-args")
     opts = opts.resolved(args.get_param, param=lambda name: f"-p {name}")
-    clock = NodeClock(args.use_sim_time)
+    clock, silent_s = NodeClock(args.use_sim_time), args.silent_s
     domain = domain_id()
     model = load_model(model_path)
     robot = opts.applied_to(load_robot(robot_path, model.classes, f"the model {model_path}"))
@@ -245,7 +255,7 @@ def run_node(
     core = PlannerNodeCore(model, robot, path, float(opts.hold_s), ahead, Watchdog(float(opts.watchdog_s)))
     if live is not None:
         core.watch(live)
-    node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())))
+    node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())), silent_s)
     try:
         with interruptible():
             node.spin(stop or threading.Event())
@@ -315,10 +325,12 @@ def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: boo
 class _Node:
     """The node's DDS endpoints and timers around a :class:`PlannerNodeCore`."""
 
-    def __init__(self, core: PlannerNodeCore, opts: NodeOptions, names: Names, clock: NodeClock, dds: Participant) -> None:
+    def __init__(
+        self, core: PlannerNodeCore, opts: NodeOptions, names: Names, clock: NodeClock, dds: Participant, silent_s: float = SILENT_S
+    ) -> None:
         robot = core.robot
         self.core, self.robot, self.opts, self.names, self.clock, self.dds = core, robot, opts, names, clock, dds
-        self.ts, self.domain = dds.types.ts, dds.domain
+        self.ts, self.domain, self.silent_s = dds.types.ts, dds.domain, silent_s
         self.failure: list[UserError] = []
         self.log = NodeLog(_stderr("INFO", names.node), _stderr("WARN", names.node), _stderr("ERROR", names.node), prefix="")
         self.last_stamp: float | None = None  # the frame of the command in force
@@ -550,7 +562,7 @@ class _Node:
                 topic = next(e for e in self.endpoints if e.role == role)
                 self.log.warn(
                     f"{topic.topic}: no publisher of {' or '.join(topic.msgtypes)} in ROS_DOMAIN_ID {self.domain} after "
-                    f"{SILENT_AFTER_S:g} s (is the robot in this domain, and its DDS on this network?); waiting"
+                    f"{self.silent_s:g} s (is the robot in this domain, and its DDS on this network?); waiting"
                 )
 
     def spin(self, stop: threading.Event) -> None:
@@ -567,7 +579,7 @@ class _Node:
             if now >= next_costmap:
                 next_costmap = now + COSTMAP_PERIOD_S
                 self.publish_costmap()
-            if not checked and now - start >= SILENT_AFTER_S:
+            if not checked and now - start >= self.silent_s:
                 checked = True
                 self.check_publishers()
 
