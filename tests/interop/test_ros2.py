@@ -319,6 +319,7 @@ def system(tmp_path_factory, short_recording):
     idle = threading.Thread(target=drive_idle, daemon=True)
     idle.start()
     player = listener = None
+    interrupted: list[subprocess.Popen] = []
     try:
         player = BagPlayer(
             bag, driven, topics=["/terrapref/labels", "/terrapref/depth", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path"]
@@ -347,12 +348,14 @@ def system(tmp_path_factory, short_recording):
         out["heard"] = heard
         # Its part is done: Ctrl-C now (it is awaited below), for a costmap a second heard is a costly message to read.
         node.send_signal(signal.SIGINT)
+        interrupted.append(node)
         idle.join()
         if idle_done.get("error") is not None:
             raise idle_done["error"]
     finally:
         for proc in (node, idle_node):
-            proc.send_signal(signal.SIGINT)
+            if proc not in interrupted:  # once: a second Ctrl-C may end a node that has sent its last stop at once
+                proc.send_signal(signal.SIGINT)
         stuck = [_end(node, node_readers, lambda: "".join(node_output["stderr"]), "the node")]
         out["node"] = (node.returncode, "".join(node_output["stdout"]), "".join(node_output["stderr"]))
         live_client.join(timeout=30)
@@ -889,3 +892,30 @@ def test_a_stop_that_cannot_be_sent_is_said_and_the_node_leaves_the_domain_all_t
     node.close()
     assert dds.published[-1] == ("closed", None)
     assert "the last stop command could not be sent (RuntimeError: the participant is gone)" in capsys.readouterr().err
+
+
+def test_a_second_ctrl_c_while_the_node_ends_does_not_cut_its_last_stop_short(tmp_path, monkeypatch, capsys):
+    """Ctrl-C twice in quick succession: the second comes while the node sends its last stop and
+    leaves the domain. It is ignored there: the stop goes out, the node leaves, and its summary is
+    said (it once died of the second SIGINT, exit -2, before either)."""
+    from terrapref.interop import ros2
+
+    _, _, dds = _node_on_a_fake_participant(tmp_path)
+    participants = []
+    monkeypatch.setattr(ros2, "Participant", lambda domain, types: participants.append(type(dds)()) or participants[-1])
+    close = ros2._Node.close
+
+    def interrupted_close(node) -> None:
+        node.last_stamp = 1.0  # it had commanded: a stop is owed
+        os.kill(os.getpid(), signal.SIGINT)
+        close(node)
+
+    monkeypatch.setattr(ros2._Node, "close", interrupted_close)
+    ended = threading.Event()
+    ended.set()  # spin returns at once: the node ends as after a first Ctrl-C
+    ros2.run_node(str(tmp_path / "m.safetensors"), str(tmp_path / "robot.yaml"), stop=ended)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # as before the node ran
+    (dds,) = participants
+    sent = [(topic, msg and (msg.linear.x, msg.angular.z)) for topic, msg in dds.published if topic.endswith("cmd") or topic == "closed"]
+    assert sent == [("/cmd", (0.0, 0.0)), ("closed", None)]
+    assert "terrapref ros2: " in capsys.readouterr().out

@@ -260,8 +260,9 @@ def run_node(
         with interruptible():
             node.spin(stop or threading.Event())
     finally:
-        node.close()
-        print(report_line(core, "ros2", node.log), flush=True)
+        with _sigint(signal.SIG_IGN):  # a second Ctrl-C right after the first must not cut the last stop short
+            node.close()
+            print(report_line(core, "ros2", node.log), flush=True)
     if node.failure:
         raise node.failure[0]
 
@@ -272,10 +273,18 @@ def interruptible() -> Iterator[None]:
     rospy's) install for themselves: one started by a script in the background inherits SIGINT
     ignored, and ``ros2 launch`` or a supervisor's SIGINT would then never end it. Off the main
     thread (a node run in-process, ended by ``stop``) nothing is installed."""
+    with _sigint(signal.default_int_handler):
+        yield
+
+
+@contextlib.contextmanager
+def _sigint(handler) -> Iterator[None]:
+    """SIGINT handled by ``handler`` within the block, then as before; off the main thread
+    (where no handler can be installed) nothing changes."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous = signal.signal(signal.SIGINT, handler)
     try:
         yield
     finally:
