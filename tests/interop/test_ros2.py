@@ -913,8 +913,12 @@ def test_a_second_ctrl_c_while_the_node_ends_does_not_cut_its_last_stop_short(tm
     monkeypatch.setattr(ros2._Node, "close", interrupted_close)
     ended = threading.Event()
     ended.set()  # spin returns at once: the node ends as after a first Ctrl-C
-    ros2.run_node(str(tmp_path / "m.safetensors"), str(tmp_path / "robot.yaml"), stop=ended)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # as before the node ran
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as a node started in a terminal has it
+    try:
+        ros2.run_node(str(tmp_path / "m.safetensors"), str(tmp_path / "robot.yaml"), stop=ended)
+    finally:
+        after = signal.signal(signal.SIGINT, previous)
+    assert after is signal.default_int_handler  # as before the node ran
     (dds,) = participants
     sent = [(topic, msg and (msg.linear.x, msg.angular.z)) for topic, msg in dds.published if topic.endswith("cmd") or topic == "closed"]
     assert sent == [("/cmd", (0.0, 0.0)), ("closed", None)]
