@@ -916,6 +916,8 @@ def test_a_second_ctrl_c_while_the_node_ends_does_not_cut_its_last_stop_short(tm
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as a node started in a terminal has it
     try:
         ros2.run_node(str(tmp_path / "m.safetensors"), str(tmp_path / "robot.yaml"), stop=ended)
+    except KeyboardInterrupt:
+        pytest.fail("the second SIGINT cut the node's last stop short")
     finally:
         after = signal.signal(signal.SIGINT, previous)
     assert after is signal.default_int_handler  # as before the node ran

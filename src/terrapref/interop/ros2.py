@@ -256,11 +256,11 @@ def run_node(
     if live is not None:
         core.watch(live)
     node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())), silent_s)
-    try:
-        with interruptible():
-            node.spin(stop or threading.Event())
-    finally:
-        with _sigint(signal.SIG_IGN):  # a second Ctrl-C right after the first must not cut the last stop short
+    with _sigint(signal.SIG_IGN):  # once the spin ends, a second Ctrl-C must not cut the last stop short
+        try:
+            with interruptible():
+                node.spin(stop or threading.Event())
+        finally:
             node.close()
             print(report_line(core, "ros2", node.log), flush=True)
     if node.failure:

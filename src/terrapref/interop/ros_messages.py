@@ -49,11 +49,17 @@ _NUMERIC = {
 }
 
 
-@functools.cache
 def typestore(ros1: bool = False) -> Typestore:
     """ROS 1 Noetic's or ROS 2 Humble's message types, tf2_msgs/TFMessage among them: one store
     a process, shared (read it, register nothing into it), so that each type's serialisers are
-    generated once, not at every export, import or node start (about 0.1 s each time)."""
+    generated once a process, not again at each export, import or node within it (about 0.1 s
+    each time)."""
+    return _typestore(bool(ros1))
+
+
+@functools.cache
+def _typestore(ros1: bool) -> Typestore:
+    """:func:`typestore`'s store, made on its first call."""
     with needs("robot", "ROS messages"):
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
