@@ -313,3 +313,11 @@ def test_a_model_taught_relief_without_depth_images_is_said(cruising, tmp_path):
         "the model was taught relief (slopes, steps, rough ground) but its frames come without depth images: "
         "the ground is taken as flat, and no ground is blocked by its geometry"
     ]
+
+
+@pytest.mark.parametrize("value", [-0.1, float("nan"), float("inf"), True, "0.3", 10**400])
+def test_a_hold_or_lead_that_is_not_a_finite_number_at_least_0_is_refused(value):
+    """An integer beyond the float range (YAML reads 1 followed by 400 zeros as one) included: refused, not an OverflowError."""
+    for name in ("hold_s", "ahead_s"):
+        with pytest.raises(ValueError, match=f"{name} must be a finite number >= 0"):
+            RobotSettings(**{name: value})

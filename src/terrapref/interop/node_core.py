@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from terrapref.errors import UserError, described
+from terrapref.errors import UserError, described, finite_number
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.depth_pairing import DEPTH_PAIRING_S, DepthPairing
 from terrapref.interop.labels import unlisted_message
@@ -625,7 +625,7 @@ class NodeOptions:
             raise UserError(origin["stamped"], f"expected true or false, got {values['stamped']!r}")
         for name, top in (("rate", 200.0), ("hold_s", 5.0), ("watchdog_s", 60.0)):
             v = values[name]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= top):
+            if not (finite_number(v) and 0 < v <= top):
                 raise UserError(origin[name], f"expected a number in (0, {top:g}], got {v!r}")
         if values["rate"] * values["hold_s"] < 1.0:  # the stop once a command's hold runs out goes out at the next tick
             raise UserError(
@@ -635,7 +635,7 @@ class NodeOptions:
             )
         for name in ROBOT_PARAMETERS:
             v = values[name]
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0)):
+            if v is not None and not (finite_number(v) and v > 0):
                 raise UserError(origin[name], f"expected a number > 0, got {v!r}")
         for name in ("path_file", "cmd_topic"):
             if values[name] is not None and (not isinstance(values[name], str) or not values[name]):

@@ -24,7 +24,6 @@ player died) would otherwise hold the last command for ever.
 from __future__ import annotations
 
 import contextlib
-import math
 import re
 import signal
 import sys
@@ -37,7 +36,7 @@ from typing import Any
 
 import yaml
 
-from terrapref.errors import UserError
+from terrapref.errors import UserError, finite_number
 from terrapref.interop.dds import CLOCK, DEFAULT, LATCHED, SENSOR_DATA, MessageTypes, Participant, QosProfile, domain_id
 from terrapref.interop.node_core import (
     AHEAD_S,
@@ -131,7 +130,7 @@ class RosArgs:
     def silent_s(self) -> float:
         """How long after its start the node says which of its inputs nobody publishes [s]."""
         value = self.params.get("silent_s", SILENT_S)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and 0 < value <= SILENT_TOP_S):
+        if not (finite_number(value) and 0 < value <= SILENT_TOP_S):
             raise UserError("-p silent_s", f"expected a number in (0, {SILENT_TOP_S:g}], got {value!r}")
         return float(value)
 

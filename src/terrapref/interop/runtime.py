@@ -145,7 +145,7 @@ class RobotSettings:
     def __post_init__(self) -> None:
         for name in ("hold_s", "ahead_s"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value >= 0):
+            if not (finite_number(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0")
 
 
