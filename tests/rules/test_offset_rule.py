@@ -24,7 +24,7 @@ from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
 from terrapref.planner.registry import load_policy
 from terrapref.rules.offset import fit as offset_fit
-from terrapref.rules.offset.features import OffsetFeatures, gated
+from terrapref.rules.offset.features import RELIEF_BANDS_DEG, OffsetFeatures, OffsetView, gated
 from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering, hidden_prices
@@ -463,10 +463,11 @@ def test_trees_beside_the_vehicle_and_others_ahead_on_the_other_side_are_no_wall
     assert np.abs(poses[:, 1] - 10.0).max() < 3.0  # never out for an escape
 
 
-def _taken(scenario, camera: PinholeCamera, pose, held: float, speed_mps: float | None = None) -> float:
-    """The offset a fresh rule holds after one frame seen at ``pose`` (on the test path, which
-    starts at x = 2 m), holding ``held`` before it, the vehicle going at ``speed_mps``."""
-    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+def _taken(scenario, camera: PinholeCamera, pose, held: float, speed_mps: float | None = None, rule: tuple = (DRIVER_LIKE, None)) -> float:
+    """The offset a fresh rule (``rule``: its utility's weights and its OffsetConfig) holds after one
+    frame seen at ``pose`` (on the test path, which starts at x = 2 m), holding ``held`` before it,
+    the vehicle going at ``speed_mps``."""
+    stage = OffsetSteering(OffsetUtility(rule[0], 5.0), camera, _terrain((0,)), CONTROL, rule[1])
     stage.held = held
     _steer(
         stage, _map_of(stage, camera), _seen_from(scenario, camera, pose), pose, ReferencePath(scenario.waypoints), pose[0] - 2.0, speed_mps
@@ -494,6 +495,60 @@ def test_at_speed_an_offset_ruled_out_is_traded_for_one_on_the_same_side(camera)
     taken = {speed: _taken(_scenario([tree]), camera, (8.0, 10.0, 0.0), -1.0, speed) for speed in (None, 1.0, 1.5)}
     assert taken[None] == taken[1.0] > 2.0  # the best, across
     assert taken[1.5] < -2.0  # clear of the tree on the right
+
+
+def test_between_two_classes_the_offset_nearest_the_path_of_those_nearly_as_good_is_taken():
+    offsets = OffsetGeometry().offsets
+    stage = OffsetSteering.__new__(OffsetSteering)  # the choice alone: the offsets, the columns and the tolerance
+    stage.offsets, stage.k, stage.config = offsets, K, OffsetConfig(trade_tolerance=0.25)
+    # A strip of rock on the path, mud beside it on the left: every offset crosses 7 m of terrain;
+    # the utility rises by less than the tolerance from 0.6 m left to its best, 1.4 m left.
+    features = np.zeros((len(offsets), K + 2))
+    features[:, 2] = 7.0
+    strip = OffsetView(features, 3.0)
+    value = -np.abs(offsets - 1.4) * 0.2 - 1.0
+    value[offsets < 0.6 - 1e-9] -= 1.0
+    best = int(np.argmax(value))
+    taken = stage.nearest_trade(value, best, strip)
+    assert offsets[best] == pytest.approx(1.4) and offsets[taken] == pytest.approx(0.6)
+    value_blocked = np.where(np.isclose(offsets, 0.6), -np.inf, value)
+    assert offsets[stage.nearest_trade(value_blocked, best, strip)] == pytest.approx(0.8)  # a ruled-out offset is never taken
+    # Moving in would cross more terrain (a lone patch gone round), or steeper ground (a mound's
+    # flank): the best, however flat the utility.
+    patch = features.copy()
+    patch[np.abs(offsets) < 1.4 - 1e-9, 3] = 2.0
+    assert stage.nearest_trade(value, best, OffsetView(patch, 3.0)) == best
+    steep = np.zeros((len(offsets), 2 * len(RELIEF_BANDS_DEG)))
+    steep[np.abs(offsets) < 1.4 - 1e-9, 3] = 1.5
+    assert stage.nearest_trade(value, best, OffsetView(features, 3.0, steep)) == best
+    # The best's own line on less than a metre of terrain (misread cells, not a strip): the best.
+    assert stage.nearest_trade(value, best, OffsetView(features * (0.9 / 7.0), 3.0)) == best
+    # No tolerance, or the best on the path: the best.
+    stage.config = OffsetConfig()
+    assert stage.nearest_trade(value, best, strip) == best
+    stage.config = OffsetConfig(trade_tolerance=0.25)
+    centre = int(np.argmin(np.abs(offsets)))
+    assert stage.nearest_trade(np.where(np.arange(len(offsets)) == centre, 0.0, -5.0), centre, strip) == centre
+    with pytest.raises(ValueError, match="trade_tolerance"):
+        OffsetConfig(trade_tolerance=-0.1)
+
+
+def test_a_strip_beside_a_better_class_is_left_no_further_than_the_utility_can_tell(camera):
+    # A water strip on the path (2.8 m wide), mud beside it on the left, rock on the right: a utility
+    # with the driver's prices, a quarter as sure of them as DRIVER_LIKE, holds 2 m left (wholly
+    # on the mud), and 1.4 m left (astride the strip's edge) within 0.25 of that. With the
+    # tolerance the rule holds there; a lone patch of mud on the path is gone round as far out.
+    strip = {"class": "water", "rectangle": {"center": [16.0, 10.0], "size": [7.0, 2.8]}}
+    better = {"class": "mud", "rectangle": {"center": [16.0, 12.9], "size": [7.0, 3.0]}}
+    worse = {"class": "rock", "rectangle": {"center": [16.0, 7.1], "size": [7.0, 3.0]}}
+    lone = {"class": "mud", "rectangle": {"center": [16.0, 10.0], "size": [3.0, 2.0]}}
+    pose, unsure = (9.0, 10.0, 0.0), 0.25 * DRIVER_LIKE
+    plain, traded = ((unsure, None), (unsure, OffsetConfig(trade_tolerance=0.25)))
+    assert _taken(_scenario([strip, better, worse]), camera, pose, 0.0, rule=plain) == pytest.approx(2.0)
+    assert _taken(_scenario([strip, better, worse]), camera, pose, 0.0, rule=traded) == pytest.approx(1.4)
+    near = (11.0, 10.0, 0.0)  # the patch 3.5 m ahead, within the utility's near distance
+    round_plain = _taken(_scenario([lone]), camera, near, 0.0, rule=plain)
+    assert abs(round_plain) >= 1.0 and _taken(_scenario([lone]), camera, near, 0.0, rule=traded) == round_plain
 
 
 def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera):
@@ -858,13 +913,14 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
     """Fitted on a drive whose frames carried depth (relief columns), the rule's map counts a cell
     once it holds RELIEF_MIN_EVIDENCE, and reads it as lethal once lethal classes hold
     RELIEF_LETHAL_SHARE of it, both written in its file; fitted on flat ground it keeps the
-    geometry's own (0 and 0.35), as before. The speed rule reads the steering rule's map, so a planner with
+    geometry's own (0 and 0.35), as before, and takes FLAT_TRADE_TOLERANCE, which a rule fitted on
+    relief does not (0), nor a file written without it. The speed rule reads the steering rule's map, so a planner with
     both keeps one map whatever the offset rule's map settings."""
     from test_speed_rule import MODEL as SPEED_MODEL
 
     from terrapref.learning.train import FitData
     from terrapref.rules.offset.features import RELIEF_BANDS_DEG
-    from terrapref.rules.offset.rule import RELIEF_LETHAL_SHARE, RELIEF_MIN_EVIDENCE
+    from terrapref.rules.offset.rule import FLAT_TRADE_TOLERANCE, RELIEF_LETHAL_SHARE, RELIEF_MIN_EVIDENCE
     from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
 
     flat = _offset_dataset()
@@ -879,9 +935,12 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
         },
     }
     on_relief = Dataset(flat.U, flat.labels, flat.w, flat.source, meta, {"offset": {**arrays, "relief_m": relief_m}})
-    on_flat = OffsetConfig().fit(FitData(flat, mirror=False)).config.geometry
+    flat_rule = OffsetConfig().fit(FitData(flat, mirror=False))
+    on_flat = flat_rule.config.geometry
     assert (on_flat.map_min_evidence, on_flat.map_lethal_share) == (0.0, 0.35)
+    assert FLAT_TRADE_TOLERANCE > 0 and flat_rule.config.trade_tolerance == flat_rule.header()["trade_tolerance"] == FLAT_TRADE_TOLERANCE
     rule = OffsetConfig().fit(FitData(on_relief, mirror=False))
+    assert rule.config.trade_tolerance == 0.0
     assert RELIEF_MIN_EVIDENCE > 0 and rule.config.geometry.map_min_evidence == RELIEF_MIN_EVIDENCE
     assert RELIEF_LETHAL_SHARE > 0.35 and rule.config.geometry.map_lethal_share == RELIEF_LETHAL_SHARE
     assert rule.header()["geometry"]["map_min_evidence"] == RELIEF_MIN_EVIDENCE
@@ -896,6 +955,12 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
     assert planner.ground_map.settings.map_min_evidence == RELIEF_MIN_EVIDENCE
     assert planner.ground_map.settings.map_lethal_share == RELIEF_LETHAL_SHARE
     assert planner.speed is not None and list(planner._maps.values()) == [planner.ground_map]  # offset, speed and stop: one map
+    older = {k: v for k, v in flat_rule.header().items() if k != "trade_tolerance"}
+    meta = {**model_meta(), "rules": [older], "drives": "offset"}
+    assert (
+        Planner(load_model(save_model(tmp_path / "older.safetensors", config, skip_path_weights(config), meta))).rule.config.trade_tolerance
+        == 0
+    )
 
 
 def test_the_compiled_swept_check_is_the_numpy_form(camera):

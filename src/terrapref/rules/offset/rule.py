@@ -18,7 +18,9 @@ candidate offset d. The rule then:
 2. goes back to the path while nothing lies on it within the utility's near distance, unless
    the way back is ruled out (then it takes the best offset that is not);
 3. otherwise keeps the offset it holds while that offset's utility falls short of the best one's
-   by at most ``switch_margin`` of the best's magnitude (:func:`keeps`), and takes the best one when not, so that it does not dither between sides;
+   by at most ``switch_margin`` of the best's magnitude (:func:`keeps`), and takes the best one when not, so that it does not dither between sides
+   (with a ``trade_tolerance``, the one nearest the path of those nearly as good that cross no more terrain:
+   :meth:`OffsetSteering.nearest_trade`);
    the vehicle faster than the control set's speed (the speed the ways are checked at), when
    lethal terrain rules out the offset held, it takes the best on the same side while that one
    falls short of the best by at most the same margin: at speed, a swap of sides costs more
@@ -79,7 +81,7 @@ from terrapref.rules.base import (
     number,
     vector,
 )
-from terrapref.rules.offset.features import FIRST_BAND, RELIEF_BANDS_DEG, OffsetFeatures
+from terrapref.rules.offset.features import FIRST_BAND, RELIEF_BANDS_DEG, OffsetFeatures, OffsetView
 from terrapref.rules.offset.fit import HIDDEN_ON_PATH_M, OffsetFit, OffsetUtility, fit_offset_utility, relief_prices
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
@@ -115,6 +117,20 @@ RELIEF_MIN_EVIDENCE = 1.0
 # layouts and confirmed on others (docs/lab/2026-12-06-false-lethal-blobs.md); on flat layouts it
 # gained nothing, and a rule fitted on flat ground keeps the geometry's own, its decisions as they were.
 RELIEF_LETHAL_SHARE = 0.5
+# The trade tolerance a rule fitted on flat ground takes (OffsetConfig.trade_tolerance): where a
+# strip of one class lies on the path with a better one beside it, the driver moves out only as
+# far as the better class is worth the detour, its centre often still on the strip, and the
+# fitted utility, nearly flat over the offsets between, put the planner wholly on the better
+# class; the offset nearest the path within 0.25 of the best (a choice the fit finds at least
+# 0.78 times as likely) keeps the triples the default table's two weak orders lost. Chosen on
+# generated layouts, confirmed on others (docs/lab/2026-12-07-nearest-trade.md). A rule fitted
+# on relief keeps 0 until it is measured there, and a file without the setting reads 0.
+FLAT_TRADE_TOLERANCE = 0.25
+TRADE_LEAST_M = 1.0
+"""A trade between classes is one the best offset's own line makes on a patch: it crosses at least
+this many metres of terrain [m]. Under `field`, misread cells put a few tenths of a metre of some
+class on most lines; taken for a trade, an offset held beside a lone patch was traded for one
+clipping it."""
 
 
 @dataclass(frozen=True)
@@ -132,6 +148,11 @@ class OffsetConfig(RuleConfig):
         escape_factor: escape offsets, used only when lethal terrain lies across every fitted
             offset as far as the features read or the way to every one brushes the clearance,
             reach this many times as far as the fitted offsets do (1 = no escape).
+        trade_tolerance: when the rule takes a new offset, it takes the one nearest the path
+            among those on the best one's side that cross no more terrain than it and whose
+            utility falls short of the best's by at most this (the fitted utility's units: the log
+            of how much less likely the fit finds the driver would hold it); 0: the best
+            (:meth:`OffsetSteering.nearest_trade`).
         geometry: the candidate offsets, the stations read along the path and the ground map.
     """
 
@@ -145,13 +166,15 @@ class OffsetConfig(RuleConfig):
     lethal_horizon_m: float = 6.0
     dt_s: float = 0.1
     escape_factor: float = 2.0
+    trade_tolerance: float = 0.0
     geometry: OffsetGeometry = field(default_factory=OffsetGeometry)
 
     def __post_init__(self) -> None:
         values = (self.switch_margin, self.pursuit_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s, self.escape_factor)
         if (
-            not all(math.isfinite(v) for v in values)
+            not all(math.isfinite(v) for v in (*values, self.trade_tolerance))
             or self.switch_margin < 0
+            or self.trade_tolerance < 0
             or self.lethal_margin_m < 0
             or self.pursuit_m <= 0
             or self.lethal_horizon_m <= 0
@@ -159,7 +182,8 @@ class OffsetConfig(RuleConfig):
             or self.escape_factor < 1
         ):
             raise ValueError(
-                "the offset rule needs switch_margin >= 0, lethal_margin_m >= 0, escape_factor >= 1 and positive distances and step"
+                "the offset rule needs switch_margin >= 0, trade_tolerance >= 0, lethal_margin_m >= 0, escape_factor >= 1 "
+                "and positive distances and step"
             )
         if not isinstance(self.geometry, OffsetGeometry):
             raise ValueError("the offset rule's geometry must be an OffsetGeometry")
@@ -195,6 +219,7 @@ class OffsetConfig(RuleConfig):
                 f"the drive did not show what holding off the path costs (its weight came out {detour:+g}, not below 0): "
                 "its prices cannot be read; drive longer along a path kept, as a teaching course shows it (terrapref course)",
             )
+        rule = self if relief is not None else replace(self, trade_tolerance=max(self.trade_tolerance, FLAT_TRADE_TOLERANCE))
         if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view, and of most of it
             geometry = replace(
                 geometry,
@@ -204,7 +229,7 @@ class OffsetConfig(RuleConfig):
         utility = OffsetUtility(
             fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval, fitted.hidden_on_path
         )
-        return OffsetRule(replace(self, geometry=geometry), utility, fitted)
+        return OffsetRule(replace(rule, geometry=geometry), utility, fitted)
 
 
 class OffsetReader(FrameReader):
@@ -265,6 +290,7 @@ class OffsetRule(Rule):
         "pursuit_m": (NUMBER, "how far ahead along the path pure pursuit aims [m]"),
         "lethal_margin_m": (NUMBER, "the clearance kept from lethal terrain beside the footprint [m]"),
         "lethal_horizon_m": (NUMBER, "how far ahead the way to each offset is checked for lethal terrain [m]"),
+        "trade_tolerance": (NUMBER, "how far below the best offset's utility one nearer the path, crossing no more terrain, may be taken"),
     }
 
     config: OffsetConfig
@@ -604,7 +630,8 @@ class OffsetSteering(SteeringRunner):
             self.held = 0.0  # nothing near and the way back clear of lethal terrain
         elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not keeps(value[held], value[best], self.config.switch_margin):
             fast = speed_mps is not None and speed_mps > self.v_mps
-            self.held = float(self.offsets[self._same_side(value, best) if fast and not np.isfinite(value[held]) else best])
+            new = self._same_side(value, best) if fast and not np.isfinite(value[held]) else self.nearest_trade(value, best, seen)
+            self.held = float(self.offsets[new])
         return float(steer(path, pose, progress_m, self.held, self.config.pursuit_m, self.v_mps))
 
     def route_prices(self) -> RoutePrices:
@@ -621,6 +648,27 @@ class OffsetSteering(SteeringRunner):
         return costmap_of(
             ground_map.cells, ground_map.origin, ground_map.settings.map_resolution_m, self.utility.weights, self.lethal, self.names
         )
+
+    def nearest_trade(self, value: np.ndarray, best: int, seen: OffsetView) -> int:
+        """The offset to take for the ``best`` one (step 3 of the module docstring): of the offsets
+        between the path and it, on its side, that cross no more metres of terrain (``seen``'s
+        class columns summed), nor of relief past any band, and whose utility falls short of the
+        best's by at most ``trade_tolerance``, the one nearest the path; the best itself where its
+        line crosses less than :data:`TRADE_LEAST_M` of terrain (no trade between classes). Between two classes (a strip of one on the path, a better one
+        beside it) a driver moves out as far as the better class is worth its detour, and a fitted
+        utility that is nearly flat over the offsets in between cannot say how far that is; where
+        moving in would cross more terrain (a patch gone round), there is no such trade."""
+        tolerance = self.config.trade_tolerance
+        if tolerance <= 0.0 or self.offsets[best] == 0.0 or not np.isfinite(value[best]):
+            return best
+        metres = seen.features[:, : self.k].sum(axis=1)
+        if metres[best] < TRADE_LEAST_M:
+            return best
+        between = (np.sign(self.offsets) != -np.sign(self.offsets[best])) & (np.abs(self.offsets) <= abs(self.offsets[best]))
+        near = between & (value >= value[best] - tolerance) & (metres <= metres[best] + 1e-6)
+        if seen.relief is not None:  # nor steeper ground: a mound on the path is not traded for
+            near &= (seen.relief <= seen.relief[best] + 1e-6).all(axis=1)
+        return int(np.flatnonzero(near)[np.argmin(np.abs(self.offsets[near]))])
 
     def _same_side(self, value: np.ndarray, best: int) -> int:
         """The offset to take when lethal terrain rules out the one held, the vehicle faster than the
