@@ -126,11 +126,11 @@ RELIEF_LETHAL_SHARE = 0.5
 # generated layouts, confirmed on others (docs/lab/2026-12-07-nearest-trade.md). A rule fitted
 # on relief keeps 0 until it is measured there, and a file without the setting reads 0.
 FLAT_TRADE_TOLERANCE = 0.25
+# A trade between classes is one the best offset's own line makes on a patch: it crosses at least
+# this many metres of terrain [m]. Under `field`, misread cells put a few tenths of a metre of some
+# class on most lines; taken for a trade, an offset held beside a lone patch was traded for one
+# clipping it.
 TRADE_LEAST_M = 1.0
-"""A trade between classes is one the best offset's own line makes on a patch: it crosses at least
-this many metres of terrain [m]. Under `field`, misread cells put a few tenths of a metre of some
-class on most lines; taken for a trade, an offset held beside a lone patch was traded for one
-clipping it."""
 
 
 @dataclass(frozen=True)
@@ -654,10 +654,12 @@ class OffsetSteering(SteeringRunner):
         between the path and it, on its side, that cross no more metres of terrain (``seen``'s
         class columns summed), nor of relief past any band, and whose utility falls short of the
         best's by at most ``trade_tolerance``, the one nearest the path; the best itself where its
-        line crosses less than :data:`TRADE_LEAST_M` of terrain (no trade between classes). Between two classes (a strip of one on the path, a better one
-        beside it) a driver moves out as far as the better class is worth its detour, and a fitted
-        utility that is nearly flat over the offsets in between cannot say how far that is; where
-        moving in would cross more terrain (a patch gone round), there is no such trade."""
+        line crosses less than :data:`TRADE_LEAST_M` of terrain (no trade between classes).
+
+        Between two classes (a strip of one on the path, a better one beside it) a driver moves
+        out as far as the better class is worth its detour, and a fitted utility that is nearly
+        flat over the offsets in between cannot say how far that is; where moving in would cross
+        more terrain (a patch gone round), there is no such trade."""
         tolerance = self.config.trade_tolerance
         if tolerance <= 0.0 or self.offsets[best] == 0.0 or not np.isfinite(value[best]):
             return best
