@@ -913,14 +913,14 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
     """Fitted on a drive whose frames carried depth (relief columns), the rule's map counts a cell
     once it holds RELIEF_MIN_EVIDENCE, and reads it as lethal once lethal classes hold
     RELIEF_LETHAL_SHARE of it, both written in its file; fitted on flat ground it keeps the
-    geometry's own (0 and 0.35), as before, and takes FLAT_TRADE_TOLERANCE, which a rule fitted on
-    relief does not (0), nor a file written without it. The speed rule reads the steering rule's map, so a planner with
+    geometry's own (0 and 0.35), as before. Neither takes a trade tolerance unless its config sets
+    one, which the fit keeps and the file holds; a file written without it reads 0. The speed rule reads the steering rule's map, so a planner with
     both keeps one map whatever the offset rule's map settings."""
     from test_speed_rule import MODEL as SPEED_MODEL
 
     from terrapref.learning.train import FitData
     from terrapref.rules.offset.features import RELIEF_BANDS_DEG
-    from terrapref.rules.offset.rule import FLAT_TRADE_TOLERANCE, RELIEF_LETHAL_SHARE, RELIEF_MIN_EVIDENCE
+    from terrapref.rules.offset.rule import RELIEF_LETHAL_SHARE, RELIEF_MIN_EVIDENCE
     from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
 
     flat = _offset_dataset()
@@ -938,7 +938,9 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
     flat_rule = OffsetConfig().fit(FitData(flat, mirror=False))
     on_flat = flat_rule.config.geometry
     assert (on_flat.map_min_evidence, on_flat.map_lethal_share) == (0.0, 0.35)
-    assert FLAT_TRADE_TOLERANCE > 0 and flat_rule.config.trade_tolerance == flat_rule.header()["trade_tolerance"] == FLAT_TRADE_TOLERANCE
+    assert flat_rule.config.trade_tolerance == flat_rule.header()["trade_tolerance"] == 0.0
+    set_rule = OffsetConfig(trade_tolerance=0.25).fit(FitData(flat, mirror=False))
+    assert set_rule.config.trade_tolerance == set_rule.header()["trade_tolerance"] == 0.25
     rule = OffsetConfig().fit(FitData(on_relief, mirror=False))
     assert rule.config.trade_tolerance == 0.0
     assert RELIEF_MIN_EVIDENCE > 0 and rule.config.geometry.map_min_evidence == RELIEF_MIN_EVIDENCE
@@ -955,12 +957,13 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
     assert planner.ground_map.settings.map_min_evidence == RELIEF_MIN_EVIDENCE
     assert planner.ground_map.settings.map_lethal_share == RELIEF_LETHAL_SHARE
     assert planner.speed is not None and list(planner._maps.values()) == [planner.ground_map]  # offset, speed and stop: one map
-    older = {k: v for k, v in flat_rule.header().items() if k != "trade_tolerance"}
-    meta = {**model_meta(), "rules": [older], "drives": "offset"}
-    assert (
-        Planner(load_model(save_model(tmp_path / "older.safetensors", config, skip_path_weights(config), meta))).rule.config.trade_tolerance
-        == 0
-    )
+
+    def tolerance_read(header: dict, name: str) -> float:
+        meta = {**model_meta(), "rules": [header], "drives": "offset"}
+        return Planner(load_model(save_model(tmp_path / name, config, skip_path_weights(config), meta))).rule.config.trade_tolerance
+
+    assert tolerance_read(set_rule.header(), "set.safetensors") == 0.25
+    assert tolerance_read({k: v for k, v in set_rule.header().items() if k != "trade_tolerance"}, "older.safetensors") == 0
 
 
 def test_the_compiled_swept_check_is_the_numpy_form(camera):

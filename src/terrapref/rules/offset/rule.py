@@ -117,15 +117,11 @@ RELIEF_MIN_EVIDENCE = 1.0
 # layouts and confirmed on others (docs/lab/2026-12-06-false-lethal-blobs.md); on flat layouts it
 # gained nothing, and a rule fitted on flat ground keeps the geometry's own, its decisions as they were.
 RELIEF_LETHAL_SHARE = 0.5
-# The trade tolerance a rule fitted on flat ground takes (OffsetConfig.trade_tolerance): where a
-# strip of one class lies on the path with a better one beside it, the driver moves out only as
-# far as the better class is worth the detour, its centre often still on the strip, and the
-# fitted utility, nearly flat over the offsets between, put the planner wholly on the better
-# class; the offset nearest the path within 0.25 of the best (a choice the fit finds at least
-# 0.78 times as likely) keeps the triples the default table's two weak orders lost. Chosen on
-# generated layouts, confirmed on others (docs/lab/2026-12-07-nearest-trade.md). A rule fitted
-# on relief keeps 0 until it is measured there, and a file without the setting reads 0.
-FLAT_TRADE_TOLERANCE = 0.25
+# A fitted rule takes no trade tolerance (OffsetConfig.trade_tolerance 0); a robot may set one. Where a
+# strip of one class lies on the path with a better one beside it, 0.25 kept the triples two of
+# the default table's orders lost (the driver moving out only part of the way), but lost as many on
+# the example table, where the fit prices the step between neighbouring classes about right
+# (docs/lab/2026-12-07-edges-on-the-lattice.md); a file written with 0.25 keeps it.
 # A trade between classes is one the best offset's own line makes on a patch: it crosses at least
 # this many metres of terrain [m]. Under `field`, misread cells put a few tenths of a metre of some
 # class on most lines; taken for a trade, an offset held beside a lone patch was traded for one
@@ -219,7 +215,6 @@ class OffsetConfig(RuleConfig):
                 f"the drive did not show what holding off the path costs (its weight came out {detour:+g}, not below 0): "
                 "its prices cannot be read; drive longer along a path kept, as a teaching course shows it (terrapref course)",
             )
-        rule = self if relief is not None else replace(self, trade_tolerance=max(self.trade_tolerance, FLAT_TRADE_TOLERANCE))
         if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view, and of most of it
             geometry = replace(
                 geometry,
@@ -229,7 +224,7 @@ class OffsetConfig(RuleConfig):
         utility = OffsetUtility(
             fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval, fitted.hidden_on_path
         )
-        return OffsetRule(replace(rule, geometry=geometry), utility, fitted)
+        return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
 
 class OffsetReader(FrameReader):
