@@ -117,11 +117,6 @@ RELIEF_MIN_EVIDENCE = 1.0
 # layouts and confirmed on others (docs/lab/2026-12-06-false-lethal-blobs.md); on flat layouts it
 # gained nothing, and a rule fitted on flat ground keeps the geometry's own, its decisions as they were.
 RELIEF_LETHAL_SHARE = 0.5
-# A fitted rule takes no trade tolerance (OffsetConfig.trade_tolerance 0); a robot may set one. Where a
-# strip of one class lies on the path with a better one beside it, 0.25 kept the triples two of
-# the default table's orders lost (the driver moving out only part of the way), but lost as many on
-# the example table, where the fit prices the step between neighbouring classes about right
-# (docs/lab/2026-12-07-edges-on-the-lattice.md); a file written with 0.25 keeps it.
 # A trade between classes is one the best offset's own line makes on a patch: it crosses at least
 # this many metres of terrain [m]. Under `field`, misread cells put a few tenths of a metre of some
 # class on most lines; taken for a trade, an offset held beside a lone patch was traded for one
@@ -148,7 +143,11 @@ class OffsetConfig(RuleConfig):
             among those on the best one's side that cross no more terrain than it and whose
             utility falls short of the best's by at most this (the fitted utility's units: the log
             of how much less likely the fit finds the driver would hold it); 0: the best
-            (:meth:`OffsetSteering.nearest_trade`).
+            (:meth:`OffsetSteering.nearest_trade`). A fit keeps the config's (0 unless a robot
+            sets one): where a strip lies on the path beside a better class, 0.25 kept the
+            triples two of the default table's orders lost, but lost as many on the example
+            table, whose fit prices the step between neighbouring classes about right
+            (docs/lab/2026-12-07-edges-on-the-lattice.md).
         geometry: the candidate offsets, the stations read along the path and the ground map.
     """
 
@@ -166,9 +165,17 @@ class OffsetConfig(RuleConfig):
     geometry: OffsetGeometry = field(default_factory=OffsetGeometry)
 
     def __post_init__(self) -> None:
-        values = (self.switch_margin, self.pursuit_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s, self.escape_factor)
+        values = (
+            self.switch_margin,
+            self.pursuit_m,
+            self.lethal_margin_m,
+            self.lethal_horizon_m,
+            self.dt_s,
+            self.escape_factor,
+            self.trade_tolerance,
+        )
         if (
-            not all(math.isfinite(v) for v in (*values, self.trade_tolerance))
+            not all(math.isfinite(v) for v in values)
             or self.switch_margin < 0
             or self.trade_tolerance < 0
             or self.lethal_margin_m < 0
