@@ -443,12 +443,12 @@ def shape_geometry(
     differences between them (a corner by either way round, averaged where both are known), each
     referred to a cell's run (:func:`_rise`); NaN where fewer than two of the nine are known."""
     n = disc.shape[0]
-    h = np.empty((3, 3))
+    rises = np.empty((2, 9))
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
         if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
-            out[i, 0], out[i, 2] = _slope_and_step(shape, reading, disc, r0, c0, h)
+            out[i, 0], out[i, 2] = _slope_and_step(shape, reading, disc, r0, c0, rises)
 
 
 @njit(cache=True, nogil=True)
@@ -463,30 +463,75 @@ def block_cells(
     """Each cell of ``cells`` (flat indices) blocked in ``blocked`` (n, n) uint8 where its slope or
     its step (:func:`shape_geometry`) is past ``limits`` (the steepest slope [rad], the highest
     step [m]; unknown geometry is past neither, as terrapref.groundmap.height.GeometryLimits.lethal
-    has it), unblocked where neither is: whether any cell's block changed."""
+    has it), unblocked where neither is: whether any cell's block changed. The cells lie in
+    discs round the cells the frame read again, so most of the differences a cell's step reads
+    are its neighbours' too: each is read once (:func:`_rises_round`)."""
     n = disc.shape[0]
     max_slope, max_step = limits
-    h = np.empty((3, 3))
+    rises, box = _rises_round(shape, reading, cells)
     changed = False
     for i in range(cells.shape[0]):
         r0, c0 = cells[i] // n, cells[i] % n
         lethal = False
         if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
-            slope, step = _slope_and_step(shape, reading, disc, r0, c0, h)
-            lethal = slope > max_slope or step > max_step
+            gx, gy = _disc_gradient(disc, r0, c0)
+            here = (r0 - box[0]) * box[2] + c0 - box[1]
+            lethal = math.atan(math.hypot(gx, gy)) > max_slope or _step_of(rises, here, box[2]) > max_step
         if bool(blocked[r0, c0]) != lethal:
             blocked[r0, c0] = 1 if lethal else 0
             changed = True
     return changed
 
 
+@njit(cache=True, nogil=True)
+def _rises_round(shape: np.ndarray, reading: tuple[float, float], cells: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """The differences (:func:`_rise`) the steps of ``cells`` (flat indices, each at least a cell
+    from the grid's edge to count) read, over the box round them: (2, box rows * box columns),
+    along x then along y, row-major in the box (NaN where no cell's step reads it), and the box's
+    first row, first column and row length."""
+    n = shape.shape[0]
+    least, cell = reading
+    r_lo, r_hi, c_lo, c_hi = n, 0, n, 0
+    for i in range(cells.shape[0]):
+        r0, c0 = cells[i] // n, cells[i] % n
+        if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
+            r_lo, r_hi, c_lo, c_hi = min(r_lo, r0 - 1), max(r_hi, r0 + 2), min(c_lo, c0 - 1), max(c_hi, c0 + 2)
+    width = max(c_hi - c_lo, 0)
+    size = max(r_hi - r_lo, 0) * width
+    rises = np.full((2, size), np.nan)
+    need = np.zeros((2, size), np.uint8)
+    for i in range(cells.shape[0]):
+        r0, c0 = cells[i] // n, cells[i] % n
+        if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
+            k = (r0 - r_lo) * width + c0 - c_lo
+            for dr in (-1, 0, 1):  # along x: the rows round the cell, its column and the one before
+                need[0, k + dr * width - 1] = need[0, k + dr * width] = 1
+            for dc in (-1, 0, 1):  # along y: the columns round it, its row and the one before
+                need[1, k - width + dc] = need[1, k + dc] = 1
+    for k in range(size):
+        r, c = r_lo + k // width, c_lo + k % width
+        if need[0, k]:
+            rises[0, k] = _rise(shape, SHAPE_X, least, cell, r, c)
+        if need[1, k]:
+            rises[1, k] = _rise(shape, SHAPE_Y, least, cell, r, c)
+    return rises, (r_lo, c_lo, width)
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _slope_and_step(
-    shape: np.ndarray, reading: tuple[float, float], disc: np.ndarray, r0: int, c0: int, h: np.ndarray
+    shape: np.ndarray, reading: tuple[float, float], disc: np.ndarray, r0: int, c0: int, rises: np.ndarray
 ) -> tuple[float, float]:
-    """Cell (``r0``, ``c0``)'s slope [rad] and step [m] (:func:`shape_geometry`; ``h`` (3, 3): scratch)."""
+    """Cell (``r0``, ``c0``)'s slope [rad] and step [m] (:func:`shape_geometry`; ``rises`` (2, 9): scratch)."""
     gx, gy = _disc_gradient(disc, r0, c0)
-    return math.atan(math.hypot(gx, gy)), _step(shape, reading, r0, c0, h)
+    least, cell = reading
+    rises[:] = np.nan
+    for dr in (-1, 0, 1):  # the differences :func:`_step_of` reads, in the 3 x 3 box round the cell
+        for dc in (-1, 0, 1):
+            if dc < 1:
+                rises[0, 4 + 3 * dr + dc] = _rise(shape, SHAPE_X, least, cell, r0 + dr, c0 + dc)
+            if dr < 1:
+                rises[1, 4 + 3 * dr + dc] = _rise(shape, SHAPE_Y, least, cell, r0 + dr, c0 + dc)
+    return math.atan(math.hypot(gx, gy)), _step_of(rises, 4, 3)
 
 
 @njit(cache=True, nogil=True)
@@ -566,41 +611,37 @@ def _move_in_discs(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _step(shape: np.ndarray, reading: tuple[float, float], r0: int, c0: int, h: np.ndarray) -> float:
-    """The height range over cell (``r0``, ``c0``) and its eight neighbours (``h`` (3, 3): scratch),
-    from the differences between them (:func:`shape_geometry`); NaN where fewer than two are known."""
-    least, cell = reading
-    h[:] = np.nan
-    h[1, 1] = 0.0
-    # Along the row and the column through the cell: h[1, 2] - h[1, 1] is the x difference at (r0, c0).
-    h[1, 2] = _rise(shape, SHAPE_X, least, cell, r0, c0)
-    h[1, 0] = -_rise(shape, SHAPE_X, least, cell, r0, c0 - 1)
-    h[2, 1] = _rise(shape, SHAPE_Y, least, cell, r0, c0)
-    h[0, 1] = -_rise(shape, SHAPE_Y, least, cell, r0 - 1, c0)
-    # The corners: from their row's middle cell along x, and from their column's middle cell along y.
-    for a in (0, 2):
-        r = r0 + a - 1
-        for b in (0, 2):
-            c = c0 + b - 1
-            total, ways = 0.0, 0
-            cx = c0 if b == 2 else c0 - 1  # the x difference between the middle of row a and the corner
-            rise = _rise(shape, SHAPE_X, least, cell, r, cx)
-            if not (math.isnan(h[a, 1]) or math.isnan(rise)):
-                total += h[a, 1] + (rise if b == 2 else -rise)
-                ways += 1
-            ry = r0 if a == 2 else r0 - 1  # the y difference between the middle of column b and the corner
-            rise = _rise(shape, SHAPE_Y, least, cell, ry, c)
-            if not (math.isnan(h[1, b]) or math.isnan(rise)):
-                total += h[1, b] + (rise if a == 2 else -rise)
-                ways += 1
-            if ways:
-                h[a, b] = total / ways
+def _step_of(rises: np.ndarray, k: int, width: int) -> float:
+    """The height range over a cell and its eight neighbours (:func:`shape_geometry`), from the
+    differences round it (``rises``: along x, along y, each (rows * ``width``,) row-major, the
+    cell at ``k``; :func:`_rise`); NaN where fewer than two of the nine heights are known. A
+    neighbour's height relative to the cell sums the differences between them: along the row
+    and the column through the cell, one; a corner, from its row's middle cell along x and from
+    its column's middle cell along y, averaged where both are known."""
+    along_x, along_y = rises[0], rises[1]
+    # h[a, b]: row a, column b of the 3 x 3 (a cell's x difference is to the next column, its y difference to the next row).
+    h01, h10, h12, h21 = -along_y[k - width], -along_x[k - 1], along_x[k], along_y[k]
+    h00 = _corner(h01 - along_x[k - width - 1], h10 - along_y[k - width - 1])
+    h02 = _corner(h01 + along_x[k - width], h12 - along_y[k - width + 1])
+    h20 = _corner(h21 - along_x[k + width - 1], h10 + along_y[k - 1])
+    h22 = _corner(h21 + along_x[k + width], h12 + along_y[k + 1])
     low, high, known = np.inf, -np.inf, 0
-    for a in range(3):
-        for b in range(3):
-            if not math.isnan(h[a, b]):
-                low, high, known = min(low, h[a, b]), max(high, h[a, b]), known + 1
+    for h in (h00, h01, h02, h10, 0.0, h12, h20, h21, h22):
+        if not math.isnan(h):
+            low, high, known = min(low, h), max(high, h), known + 1
     return high - low if known >= 2 else np.nan
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _corner(by_row: float, by_column: float) -> float:
+    """A corner's height from its row's middle cell and from its column's (either NaN: not
+    known that way): their mean where both are known (:func:`_step_of`)."""
+    total, ways = 0.0, 0
+    if not math.isnan(by_row):
+        total, ways = total + by_row, ways + 1
+    if not math.isnan(by_column):
+        total, ways = total + by_column, ways + 1
+    return total / ways if ways else np.nan
 
 
 @njit(cache=True, nogil=True, inline="always")
