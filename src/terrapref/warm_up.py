@@ -58,6 +58,8 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     from terrapref.groundmap.height_compiled import near_blocked
     from terrapref.learning.model_file import load_model
     from terrapref.planner import Planner, PlannerDriver
+    from terrapref.rules.offset.features import BANDS
+    from terrapref.rules.offset.offsets_compiled import relief_metres
     from terrapref.sim import Simulation
 
     sim = Simulation(resolve_scenario("relief_demo"))
@@ -77,6 +79,7 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     GradeCheck(1).arrived(0.0, 0.0, 0.0, 0.0)  # the grades read ahead, checked once there
     gmap.read_shape()  # the sums a re-centred map works out afresh
     gmap.beside_attitudes(np.zeros((1, 2)), np.array([[0.0, 1.0]]), np.zeros(1))  # the relief an offset rule learned prices
+    relief_metres(np.zeros((1, 1, 2)), 1, BANDS, 0.25)  # ... counted in its bands
     sim.world.roughness_at(np.zeros((1, 2)))  # an evaluation's speed by roughness band on relief
     expert = ExpertDriver(ExpertConfig(relief=ReliefStyle()))
     expert.reset(sim.scenario, np.random.default_rng(0))

@@ -23,6 +23,7 @@ from terrapref.camera import PinholeCamera
 from terrapref.groundmap import attitude_compiled, map_compiled
 from terrapref.groundmap.map_compiled import MapLayers
 from terrapref.rules.offset import offsets_compiled
+from terrapref.rules.offset.features import RELIEF_BANDS_DEG
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
 from terrapref.rules.offset.steering import pursuit_yaw_rates, steer
@@ -693,6 +694,26 @@ def test_gated_value_gives_the_numpy_forms_value(seed: int, n_off: int, k: int, 
     weights = rng.normal(0.0, 1.0, k + 3) * 10.0 ** rng.integers(-2, 3, k + 3)
     got = offsets_compiled.gated_value(features, offsets, view_near_m > near_m, weights)
     assert _same(got, _weighted_numpy(_gated_numpy(features, view_near_m, offsets, near_m), weights))
+
+
+@FAST
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_off=st.integers(1, 31),
+    n_st=st.integers(1, 60),
+    upto_share=st.floats(0.0, 1.0),
+    missing=st.floats(0.0, 0.6),
+)
+def test_relief_metres_give_the_numpy_forms_columns(seed: int, n_off: int, n_st: int, upto_share: float, missing: float):
+    rng = np.random.default_rng(seed)
+    bands = np.asarray(RELIEF_BANDS_DEG)
+    attitudes = rng.uniform(0.0, 30.0, (n_off, n_st, 2))
+    on_band = rng.random(attitudes.shape) < 0.2  # exactly on a band: not past it
+    attitudes[on_band] = rng.choice(bands, int(on_band.sum()))
+    attitudes[rng.random(attitudes.shape) < missing] = np.nan  # unknown: past none
+    upto = int(round(upto_share * n_st))
+    got = offsets_compiled.relief_metres(attitudes, upto, bands, 0.25)
+    assert _same(got, (attitudes[:, :upto, :, None] > bands).sum(axis=1).reshape(n_off, -1) * 0.25)
 
 
 # --- the path's frame and pure pursuit -----------------------------------------------------------

@@ -46,6 +46,8 @@ from terrapref.vehicle import VehicleConfig
 
 RELIEF_BANDS_DEG = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0, 22.0)
 """The side slopes and grades [deg] past which the relief columns count the metres of the way."""
+BANDS = np.asarray(RELIEF_BANDS_DEG)
+"""The same bands as an array, as the compiled count of the relief columns reads them."""
 FIRST_BAND = (RELIEF_BANDS_DEG[0], RELIEF_BANDS_DEG[0])
 """Side slope and grade [deg] past which ground on the path is a patch on it, in the frames a fit reads."""
 WHEELBASE_M = VehicleConfig.wheelbase_m
@@ -127,9 +129,7 @@ class OffsetFeatures:
         )
         if attitudes is None:
             return OffsetView(features, float(near_m))
-        bands = np.asarray(RELIEF_BANDS_DEG)
-        past = attitudes[:, :upto, :, None] > bands  # (O, upto, 2, B); unknown ground is past none
-        return OffsetView(features, float(near_m), past.sum(axis=1).reshape(len(self.offsets), -1) * c.station_step_m)
+        return OffsetView(features, float(near_m), kernels.relief_metres(attitudes, upto, BANDS, c.station_step_m))
 
 
 def gated(view: OffsetView, offsets: np.ndarray, near_m: float) -> np.ndarray:

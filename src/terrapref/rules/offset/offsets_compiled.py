@@ -88,3 +88,22 @@ def gated_value(features: np.ndarray, offsets: np.ndarray, gate: bool, weights: 
             value = value + features[o, j] * weights[j]
         out[o] = value + offsets[o] * offsets[o] * g * weights[n_feat]
     return out
+
+
+@njit(cache=True, nogil=True)
+def relief_metres(attitudes: np.ndarray, upto: int, bands: np.ndarray, step: float) -> np.ndarray:
+    """Each offset's relief columns (O, 2 B): over its first ``upto`` stations, the metres (the
+    stations counted times ``step``) at which the body's side slope, then its grade
+    (``attitudes`` (O, S, 2) [deg]; NaN: unknown, past none), is past each of ``bands`` (B,)
+    [deg]. The NumPy form: ``(attitudes[:, :upto, :, None] > bands).sum(axis=1).reshape(O, -1)
+    * step`` (terrapref.rules.offset.features)."""
+    n_off, n_st, n_bands = attitudes.shape[0], min(upto, attitudes.shape[1]), bands.shape[0]
+    counts = np.zeros((n_off, 2 * n_bands), np.int64)
+    for o in range(n_off):
+        for q in range(n_st):
+            for a in range(2):
+                value = attitudes[o, q, a]
+                for b in range(n_bands):
+                    if value > bands[b]:
+                        counts[o, a * n_bands + b] += 1
+    return counts * step
