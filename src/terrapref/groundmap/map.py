@@ -161,6 +161,7 @@ class GroundMap:
         each frame's votes (which leave the cells they fall in to be decided from their evidence);
         those no longer within reach of one decided from their evidence again."""
         if not self._blocking and not len(self._lethal_by_geometry):
+            self._moved = False  # none blocked, none read as lethal for it: as finding them again would leave it
             return
         cells = self._cells.reshape(-1)
         if self._moved:  # the blocked cells changed (or the map moved): the cells near them found again
