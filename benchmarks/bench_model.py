@@ -9,6 +9,12 @@ reference the other benchmarks use, measured in the same run:
 
     OMP_NUM_THREADS=1 taskset -c 0 .venv/bin/python benchmarks/bench_model.py me.safetensors gen:2000 \\
         --classes examples/classes/rellis3d.yaml
+
+The default decision on relief beside the flat one, in turn (``scripts/bench.sh`` makes both
+models, each from one drive):
+
+    OMP_NUM_THREADS=1 taskset -c 0 .venv/bin/python benchmarks/bench_model.py relief.safetensors genrelief:2000 \\
+        --beside flat.safetensors gen:2000
 """
 
 from __future__ import annotations
@@ -52,15 +58,47 @@ def main() -> None:
     parser.add_argument("model")
     parser.add_argument("scenario")
     parser.add_argument("--classes", help="the class table the course is read with (a terrapref-classes/1 file)")
+    parser.add_argument(
+        "--beside",
+        nargs=2,
+        metavar=("MODEL", "SCENARIO"),
+        help="a second decision timed in turn with the first (e.g. a flat model on gen:2000 beside a relief one): "
+        "three runs of each, and the ratio of their medians run by run",
+    )
     args = parser.parse_args()
     decision_times(args.model, args.scenario, args.classes)  # compiled loops and caches warmed
+    if args.beside is not None:
+        decision_times(*args.beside, args.classes)
+        _in_turn((args.model, args.scenario), tuple(args.beside), args.classes)
+        return
     t = decision_times(args.model, args.scenario, args.classes)
     ref = reference_ms()
-    columns = len(load_model(args.model).features.feature_classes)
     print(f"reference: naive NumPy render (reference.py)  {ref:.2f} ms")
+    _report(args.model, args.scenario, t, ref)
+
+
+def _report(model: str, scenario: str, t: np.ndarray, ref: float) -> None:
+    columns = len(load_model(model).features.feature_classes)
     print(
-        f"decision of {args.model} ({columns} terrain columns) on {args.scenario}: median {np.median(t) * 1e6:.1f} us, "
+        f"decision of {model} ({columns} terrain columns) on {scenario}: median {np.median(t) * 1e6:.1f} us, "
         f"p90 {np.percentile(t, 90) * 1e6:.1f} us over {len(t)} decisions; median / reference {np.median(t) * 1e3 / ref:.4f}"
+    )
+
+
+def _in_turn(first: tuple[str, str], second: tuple[str, str], classes: str | None, runs: int = 3) -> None:
+    """Three runs of each decision in turn, each beside a reference, and the ratio of their medians
+    run by run: on a shared machine the two move together, and the ratio holds better than either."""
+    ratios = []
+    for run in range(runs):
+        ref = reference_ms()
+        print(f"run {run + 1}: reference: naive NumPy render (reference.py)  {ref:.2f} ms")
+        a, b = decision_times(*first, classes), decision_times(*second, classes)
+        _report(*first, a, ref)
+        _report(*second, b, ref)
+        ratios.append(float(np.median(a) / np.median(b)))
+        print(f"run {run + 1}: the first's median over the second's: {ratios[-1]:.2f}")
+    print(
+        f"the first decision over the second, the middle of {runs} runs: {sorted(ratios)[runs // 2]:.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
     )
 
 

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Run the benchmarks on one core: render time per frame, simulation-loop frame rate,
-# utility features per frame, and recording train_course with the synthetic driver.
+# utility features per frame, recording train_course with the synthetic driver, and the
+# default decision on relief beside the flat one (two models made first, about 3 minutes).
 # Extra arguments go to benchmarks/bench_sim.py (e.g. --poses 2000 --frames 3000).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -13,3 +14,15 @@ if command -v taskset >/dev/null 2>&1; then
 fi
 "${pin[@]}" .venv/bin/python benchmarks/bench_sim.py "$@"
 "${pin[@]}" .venv/bin/python benchmarks/bench_demos.py
+# The default decision on relief beside the flat one, in turn: a model of one drive of
+# teach_relief (the shaky driver, the default relief style) and one of teach_course, made afresh.
+models=$(mktemp -d)
+trap 'rm -rf "$models"' EXIT
+for course in teach_relief teach_course; do
+  style=(--style shaky --relief-style default)
+  [ "$course" = teach_course ] && style=()
+  .venv/bin/terrapref record "$course" "${style[@]}" --out "$models/$course" --quiet
+  .venv/bin/terrapref train "$models/$course" --out "$models/$course.safetensors" >/dev/null
+done
+"${pin[@]}" .venv/bin/python benchmarks/bench_model.py "$models/teach_relief.safetensors" genrelief:2000 \
+  --beside "$models/teach_course.safetensors" gen:2000
