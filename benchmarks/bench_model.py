@@ -63,7 +63,7 @@ def main() -> None:
         nargs=2,
         metavar=("MODEL", "SCENARIO"),
         help="a second decision timed in turn with the first (e.g. a flat model on gen:2000 beside a relief one): "
-        "three runs of each, and the ratio of their medians run by run",
+        "three runs of each, and the ratio of their medians run by run (--classes reads both courses)",
     )
     args = parser.parse_args()
     decision_times(args.model, args.scenario, args.classes)  # compiled loops and caches warmed
@@ -86,8 +86,9 @@ def _report(model: str, scenario: str, t: np.ndarray, ref: float) -> None:
 
 
 def _in_turn(first: tuple[str, str], second: tuple[str, str], classes: str | None, runs: int = 3) -> None:
-    """Three runs of each decision in turn, each beside a reference, and the ratio of their medians
-    run by run: on a shared machine the two move together, and the ratio holds better than either."""
+    """``runs`` runs of each decision in turn, each beside a reference, and the ratio of their
+    medians run by run: on a shared machine the two move together, and the ratio holds better
+    than either."""
     ratios = []
     for run in range(runs):
         ref = reference_ms()
@@ -97,9 +98,8 @@ def _in_turn(first: tuple[str, str], second: tuple[str, str], classes: str | Non
         _report(*second, b, ref)
         ratios.append(float(np.median(a) / np.median(b)))
         print(f"run {run + 1}: the first's median over the second's: {ratios[-1]:.2f}")
-    print(
-        f"the first decision over the second, the middle of {runs} runs: {sorted(ratios)[runs // 2]:.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
-    )
+    middle, low, high = sorted(ratios)[runs // 2], min(ratios), max(ratios)
+    print(f"the first decision over the second, the middle of {runs} runs: {middle:.2f} ({low:.2f}-{high:.2f})")
 
 
 if __name__ == "__main__":

@@ -12,8 +12,8 @@ pin=()
 if command -v taskset >/dev/null 2>&1; then
   pin=(taskset -c 0)
 fi
-"${pin[@]}" .venv/bin/python benchmarks/bench_sim.py "$@"
-"${pin[@]}" .venv/bin/python benchmarks/bench_demos.py
+${pin[@]+"${pin[@]}"} .venv/bin/python benchmarks/bench_sim.py "$@"
+${pin[@]+"${pin[@]}"} .venv/bin/python benchmarks/bench_demos.py
 # The default decision on relief beside the flat one, in turn: a model of one drive of
 # teach_relief (the shaky driver, the default relief style) and one of teach_course, made afresh.
 models=$(mktemp -d)
@@ -21,8 +21,8 @@ trap 'rm -rf "$models"' EXIT
 for course in teach_relief teach_course; do
   style=(--style shaky --relief-style default)
   [ "$course" = teach_course ] && style=()
-  .venv/bin/terrapref record "$course" "${style[@]}" --out "$models/$course" --quiet
+  .venv/bin/terrapref record "$course" ${style[@]+"${style[@]}"} --out "$models/$course" --quiet
   .venv/bin/terrapref train "$models/$course" --out "$models/$course.safetensors" >/dev/null
 done
-"${pin[@]}" .venv/bin/python benchmarks/bench_model.py "$models/teach_relief.safetensors" genrelief:2000 \
+${pin[@]+"${pin[@]}"} .venv/bin/python benchmarks/bench_model.py "$models/teach_relief.safetensors" genrelief:2000 \
   --beside "$models/teach_course.safetensors" gen:2000

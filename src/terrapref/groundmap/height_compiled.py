@@ -474,9 +474,8 @@ def block_cells(
         r0, c0 = cells[i] // n, cells[i] % n
         lethal = False
         if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
-            gx, gy = _disc_gradient(disc, r0, c0)
             here = (r0 - box[0]) * box[2] + c0 - box[1]
-            lethal = math.atan(math.hypot(gx, gy)) > max_slope or _step_of(rises, here, box[2]) > max_step
+            lethal = _slope(disc, r0, c0) > max_slope or _step_of(rises, here, box[2]) > max_step
         if bool(blocked[r0, c0]) != lethal:
             blocked[r0, c0] = 1 if lethal else 0
             changed = True
@@ -522,7 +521,6 @@ def _slope_and_step(
     shape: np.ndarray, reading: tuple[float, float], disc: np.ndarray, r0: int, c0: int, rises: np.ndarray
 ) -> tuple[float, float]:
     """Cell (``r0``, ``c0``)'s slope [rad] and step [m] (:func:`shape_geometry`; ``rises`` (2, 9): scratch)."""
-    gx, gy = _disc_gradient(disc, r0, c0)
     least, cell = reading
     rises[:] = np.nan
     for dr in (-1, 0, 1):  # the differences :func:`_step_of` reads, in the 3 x 3 box round the cell
@@ -531,7 +529,14 @@ def _slope_and_step(
                 rises[0, 4 + 3 * dr + dc] = _rise(shape, SHAPE_X, least, cell, r0 + dr, c0 + dc)
             if dr < 1:
                 rises[1, 4 + 3 * dr + dc] = _rise(shape, SHAPE_Y, least, cell, r0 + dr, c0 + dc)
-    return math.atan(math.hypot(gx, gy)), _step_of(rises, 4, 3)
+    return _slope(disc, r0, c0), _step_of(rises, 4, 3)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _slope(disc: np.ndarray, r0: int, c0: int) -> float:
+    """Cell (``r0``, ``c0``)'s slope [rad]: that of its gradient over the disc (:func:`_disc_gradient`)."""
+    gx, gy = _disc_gradient(disc, r0, c0)
+    return math.atan(math.hypot(gx, gy))
 
 
 @njit(cache=True, nogil=True)
