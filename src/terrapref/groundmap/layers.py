@@ -27,6 +27,9 @@ class Layer:
         fill_unseen: the fill is the column of ground never seen, K + 1.
         values: this many values in each cell, (n, n, values), where more than one (and not
             ``per_column``).
+        from_depth: written from depth images alone (the heights, the ground's shape and what
+            is read from it): a map that has read none, and handed none out, holds it empty,
+            and a re-centre leaves it as it is (moved, an empty layer reads the same).
     """
 
     name: str
@@ -35,6 +38,7 @@ class Layer:
     per_column: bool = False
     fill_unseen: bool = False
     values: int = 1
+    from_depth: bool = False
 
     def fill_value(self, k: int) -> float:
         """The value of an empty cell, for a map of ``k`` terrain columns."""
@@ -57,35 +61,35 @@ LAYERS: tuple[Layer, ...] = (
     # The mean height of the depth returns that fell in each cell [m], NaN where none did, each
     # weighed by the inverse of its variance (terrapref.groundmap.height), how many did, their
     # weighted sum of squared deviations, and their weights' sum [1 / m^2].
-    Layer("elevation", np.float32, np.nan),
-    Layer("returns", np.uint32, 0),
-    Layer("spread", np.float32, 0.0),
-    Layer("weight", np.float32, 0.0),
+    Layer("elevation", np.float32, np.nan, from_depth=True),
+    Layer("returns", np.uint32, 0, from_depth=True),
+    Layer("spread", np.float32, 0.0, from_depth=True),
+    Layer("weight", np.float32, 0.0, from_depth=True),
     # The ground's shape, as each frame alone shows it, fused over frames
     # (terrapref.groundmap.height_compiled.depth_frame): each cell's height difference to its
     # neighbour along x and the run between their returns along x, each the mean of the frames'
     # weighed by the inverse of its variance [m], the weights' sum [1 / m^2], and likewise along
     # y (height_compiled.SHAPE_VALUES: one cell's six together, as the kernels read them). What
     # its slope and steps are read from.
-    Layer("shape", np.float32, 0.0, values=6),
+    Layer("shape", np.float32, 0.0, values=6, from_depth=True),
     # The differences along x and y as the cells round each were last read (NaN: not known then;
     # +inf: never read), so that only the cells round a changed one are read again, and the runs
     # read with them (NaN where the difference is not a number).
-    Layer("checked_dx", np.float32, np.inf),
-    Layer("checked_dy", np.float32, np.inf),
-    Layer("checked_dx_run", np.float32, np.nan),
-    Layer("checked_dy_run", np.float32, np.nan),
+    Layer("checked_dx", np.float32, np.inf, from_depth=True),
+    Layer("checked_dy", np.float32, np.inf, from_depth=True),
+    Layer("checked_dx_run", np.float32, np.nan, from_depth=True),
+    Layer("checked_dy_run", np.float32, np.nan, from_depth=True),
     # Over the disc round each cell its slope is read over, the sums of those read differences
     # and runs and how many are known, along x and then y (height_compiled.DISC_SUMS): kept up to
     # date as the differences are read, so that a cell's gradient is two quotients.
-    Layer("disc", np.float32, 0.0, values=6),
+    Layer("disc", np.float32, 0.0, values=6, from_depth=True),
     # The ground's roughness as each frame alone shows it, fused over frames
     # (terrapref.groundmap.height_compiled.depth_frame): the weighted mean of the frames' squared
     # roughness less what their depth noise adds [m^2], and the weights' sum (0: never read).
-    Layer("rough", np.float32, 0.0),
-    Layer("rough_weight", np.float32, 0.0),
+    Layer("rough", np.float32, 0.0, from_depth=True),
+    Layer("rough_weight", np.float32, 0.0, from_depth=True),
     # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
     # the cell reads as lethal whatever its evidence.
-    Layer("blocked", np.uint8, 0),
+    Layer("blocked", np.uint8, 0, from_depth=True),
 )
 """The ground map's layers, in the order they are made (module docstring)."""

@@ -87,6 +87,7 @@ class GroundMap:
         self._lethal_by_geometry = np.empty(0, dtype=np.int64)  # the cells that read as lethal for it (flat indices)
         self._moved = False  # the blocked cells changed since those were found
         self._read_depth = False  # whether a depth image updated the map since it was made or reset
+        self._depth_held = False  # whether its depth layers may hold anything: read from depth, or handed out (Layer.from_depth)
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
         # The ray through each sample's pixel centre (camera frame, z = 1), and where the mount's
         # camera sees it meet the ground: a tilted camera moves each sample by where its ray lands.
@@ -119,7 +120,7 @@ class GroundMap:
             self._vote_cell = np.empty(len(self._pixels.flat), dtype=np.int64)
             self._vote_column = np.empty(len(self._pixels.flat), dtype=np.int64)
             self._pixel_weight = np.bincount(self._sample_pix, weights=self._weight, minlength=len(self._pixels.flat)).astype(np.float32)
-        self._read_depth = True
+        self._read_depth = self._depth_held = True
         h, res = self.height_settings, c.map_resolution_m
         touched = height_kernels.depth_frame(
             depth.image,
@@ -180,6 +181,7 @@ class GroundMap:
     @property
     def heights(self) -> Heights:
         """The height layers (terrapref.groundmap.height), valid until the map is next re-centred."""
+        self._depth_held = True  # handed out: the caller may write them
         return Heights(self._layers["elevation"], self._layers["returns"], self._layers["spread"], self._layers["weight"])
 
     def geometry_at(self, points: np.ndarray) -> np.ndarray:
@@ -303,6 +305,7 @@ class GroundMap:
         """Read the ground's shape afresh over the whole map as its ``shape`` layer now holds it
         (each frame's depth image reads it where the frame changed it): for code that writes that
         layer itself. The slope and the gradients are read from what was read."""
+        self._depth_held = True
         least, shape = self.height_settings.least_weight, self._shape
         for axis, first in (("x", height_kernels.SHAPE_X), ("y", height_kernels.SHAPE_Y)):
             rise, run, weight = (shape[..., first + k] for k in (height_kernels.RISE, height_kernels.RUN, height_kernels.WEIGHT))
@@ -315,6 +318,7 @@ class GroundMap:
     def layer(self, name: str) -> np.ndarray:
         """The layer ``name`` of :attr:`LAYERS`, (n, n) or (n, n, K + 1) (rows y, columns x): the
         map's own array, for the code that writes it; valid until the map is next re-centred."""
+        self._depth_held = self._depth_held or any(layer.from_depth for layer in self.LAYERS if layer.name == name)
         return self._layers[name]
 
     @property
@@ -335,7 +339,7 @@ class GroundMap:
         """Forget everything seen."""
         for layer in self.LAYERS:
             self._layers[layer.name].fill(layer.fill_value(self.k))
-        self._blocking, self._moved, self._read_depth = False, False, False
+        self._blocking, self._moved, self._read_depth, self._depth_held = False, False, False, False
         self._lethal_by_geometry = np.empty(0, dtype=np.int64)
         self.frame = 0
         self.origin = self._origin_xy = None
@@ -356,11 +360,12 @@ class GroundMap:
             old = np.round(self.origin / c.map_resolution_m).astype(np.int64)
             dx, dy = int(new[0] - old[0]), int(new[1] - old[1])
             for layer in self.LAYERS:
-                self._layers[layer.name] = _shifted(self._layers[layer.name], dx, dy, layer.fill_value(self.k))
+                if self._depth_held or not layer.from_depth:  # empty depth layers read the same moved (most of a flat map's)
+                    self._layers[layer.name] = _shifted(self._layers[layer.name], dx, dy, layer.fill_value(self.k))
             self._lethal_by_geometry, self._moved = np.empty(0, dtype=np.int64), True  # moved with the cells; found again
-            # The discs that reached past the old square, or now reach into it from outside, summed afresh.
-            reach = disc_reach(self.height_settings, c.map_resolution_m)
-            height_kernels.disc_sums(self._checked, reach, _across_the_edge(self._n, dx, dy, reach), self._disc)
+            if self._depth_held:  # the discs that reached past the old square, or now reach into it from outside, summed afresh
+                reach = disc_reach(self.height_settings, c.map_resolution_m)
+                height_kernels.disc_sums(self._checked, reach, _across_the_edge(self._n, dx, dy, reach), self._disc)
         self.origin = new * c.map_resolution_m
         self._origin_xy = (float(self.origin[0]), float(self.origin[1]))
 
