@@ -60,6 +60,32 @@ def test_a_layer_added_to_the_list_moves_and_empties_with_the_map():
     assert np.isnan(tall.layer("height")).all() and not tall.evidence.any() and tall.origin is None
 
 
+def test_a_depth_layer_written_through_the_map_moves_with_it_and_an_untouched_one_stays_empty():
+    """A flat map re-centres without copying its depth layers while none may hold anything; one
+    handed out (and written) moves with the square as any layer does."""
+    camera = PinholeCamera()
+    scenario = _scenario([TREES])
+    untouched, written = GroundMap(camera, _terrain((0,))), GroundMap(camera, _terrain((0,)))
+    first, far = (4.0, 10.0, 0.0), (24.0, 10.0, 0.0)  # 20 m on: re-centred
+    for pose in (first, far):
+        view = _seen_from(scenario, camera, pose)
+        untouched.update(view, pose)
+        written.update(view, pose)
+        if pose == first:  # a value in the elevation layer under the vehicle, as code writing the layer would
+            res = written.settings.map_resolution_m
+            i, j = int((first[0] - written.origin[0]) / res), int((first[1] - written.origin[1]) / res)
+            written.layer("elevation")[j, i] = 1.5
+    res = written.settings.map_resolution_m
+    i, j = int((first[0] - written.origin[0]) / res), int((first[1] - written.origin[1]) / res)
+    assert written.layer("elevation")[j, i] == 1.5 and np.count_nonzero(~np.isnan(written.layer("elevation"))) == 1
+    for layer in LAYERS:  # the untouched map: each depth layer still all its fill, each other layer as the written map's
+        ours, theirs = untouched.layer(layer.name), written.layer(layer.name)
+        if layer.from_depth:
+            np.testing.assert_array_equal(ours, np.full_like(ours, layer.fill_value(untouched.k)))
+        else:
+            np.testing.assert_array_equal(ours, theirs)
+
+
 def test_a_rule_reads_a_map_with_a_layer_added_as_it_reads_one_without():
     camera = PinholeCamera()
     scenario = _scenario([TREES])
