@@ -88,6 +88,7 @@ class GroundMap:
         self._moved = False  # the blocked cells changed since those were found
         self._read_depth = False  # whether a depth image updated the map since it was made or reset
         self._depth_held = False  # whether its depth layers may hold anything: read from depth, or handed out (Layer.from_depth)
+        self._from_depth = frozenset(layer.name for layer in self.LAYERS if layer.from_depth)
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
         # The ray through each sample's pixel centre (camera frame, z = 1), and where the mount's
         # camera sees it meet the ground: a tilted camera moves each sample by where its ray lands.
@@ -284,7 +285,7 @@ class GroundMap:
     @property
     def _checked(self) -> tuple[np.ndarray, ...]:
         """The differences and their runs as they were last read (terrapref.groundmap.height_compiled.shape_to_check)."""
-        return tuple(self.layer(name) for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
+        return tuple(self._layers[name] for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
 
     @property
     def _reading(self) -> tuple[float, float]:
@@ -310,15 +311,15 @@ class GroundMap:
         for axis, first in (("x", height_kernels.SHAPE_X), ("y", height_kernels.SHAPE_Y)):
             rise, run, weight = (shape[..., first + k] for k in (height_kernels.RISE, height_kernels.RUN, height_kernels.WEIGHT))
             known = weight.astype(np.float64) >= least  # as the kernels compare them
-            self.layer(f"checked_d{axis}")[...] = np.where(known, rise, np.float32(np.nan))
-            self.layer(f"checked_d{axis}_run")[...] = run
+            self._layers[f"checked_d{axis}"][...] = np.where(known, rise, np.float32(np.nan))
+            self._layers[f"checked_d{axis}_run"][...] = run
         reach = disc_reach(self.height_settings, self.settings.map_resolution_m)
         height_kernels.disc_sums(self._checked, reach, np.arange(self._n * self._n), self._disc)
 
     def layer(self, name: str) -> np.ndarray:
         """The layer ``name`` of :attr:`LAYERS`, (n, n) or (n, n, K + 1) (rows y, columns x): the
         map's own array, for the code that writes it; valid until the map is next re-centred."""
-        self._depth_held = self._depth_held or any(layer.from_depth for layer in self.LAYERS if layer.name == name)
+        self._depth_held |= name in self._from_depth
         return self._layers[name]
 
     @property
