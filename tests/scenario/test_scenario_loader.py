@@ -794,6 +794,16 @@ def test_start_off_the_map() -> None:
     assert "off the map" in problem.message
 
 
+@pytest.mark.parametrize(("yaw_deg", "refused"), [(1e6, False), (-1e6, False), (1.0000001e6, True), (-1e308, True)])
+def test_a_start_heading_past_a_million_degrees_is_refused(yaw_deg: float, refused: bool) -> None:
+    data = scenario(start=[2.0, 5.0, yaw_deg])
+    if not refused:
+        assert parse_scenario(data, "x.yaml").start[2] == math.radians(yaw_deg)
+        return
+    problem = only_problem(data)
+    assert (problem.field, problem.message) == ("start[2]", f"the heading must be within +-1,000,000 deg, got {yaw_deg:g}")
+
+
 # Trees (lethal) over x 8-12 m, y 7-10 m; the footprint is the line 0.6 m either side of the start,
 # and a point counts where its 0.1 m cell's centre is under the trees, as the simulator reads it.
 TREES = {"class": "non_traversable", "rectangle": {"center": [10.0, 8.5], "size": [4.0, 3.0]}}

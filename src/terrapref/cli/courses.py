@@ -94,7 +94,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     from terrapref.camera import PinholeCamera, SegmentationRenderer
     from terrapref.pngio import depth_key, depth_preview, depth_to_millimetres, preview_with_legend, write_png_atomic
-    from terrapref.scenario import resolve_scenario
+    from terrapref.scenario import MAX_YAW_DEG, resolve_scenario
     from terrapref.vehicle import Pose, Vehicle
     from terrapref.world import rasterise
 
@@ -113,11 +113,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
     camera = PinholeCamera()
     (w, h), reach = scenario.size_m, camera.config.max_range_m
-    if not (-reach <= x <= w + reach and -reach <= y <= h + reach and abs(yaw_deg) <= 1e6):
+    if not (-reach <= x <= w + reach and -reach <= y <= h + reach and abs(yaw_deg) <= MAX_YAW_DEG):
         raise UserError(
             "--pose",
             f"({x:g}, {y:g}, {yaw_deg:g} deg) is not a pose the camera sees {scenario.name}'s {w:g} x {h:g} m world from "
-            f"(x and y within {reach:g} m of it, |yaw| <= 1e6 deg)",
+            f"(x and y within {reach:g} m of it, |yaw| <= {MAX_YAW_DEG:,.0f} deg)",
         )
     world = rasterise(scenario)
     renderer = SegmentationRenderer(camera, world)

@@ -31,7 +31,11 @@ _SHAPE_KEYS = ("polygon", "circle", "rectangle")
 MAX_RELIEF_M = 1000.0  # the largest height or noise amplitude of one relief entry [m]
 MIN_RELIEF_M = 0.001  # the least, either way: finer relief changes no height a vehicle or a depth camera tells [m]
 MAX_RELIEF_REACH_M = 1e6  # relief's points lie within this distance of the map [m]
-MAX_WAVELENGTH_M = 1e4  # the longest wavelength of noise [m]
+# The widest a relief entry's sizes may be (a noise's wavelength, a mound's radius, a ridge's width,
+# a plateau's ramp) [m]: the width of the largest map at 1 m cells (MAX_CELLS). Far wider ones
+# change the heights of a map by less than their rounding, and a file that gives one means something else.
+MAX_RELIEF_SPAN_M = 1e4
+MAX_YAW_DEG = 1e6  # the largest start heading a file may give, either way [deg]
 
 
 class _Checker:
@@ -396,6 +400,9 @@ def _start(
     if size_m is not None and not _on_map(np.array(s[:2]), size_m):
         c.fail("start", f"({s[0]:g}, {s[1]:g}) is off the map")
         return None
+    if abs(s[2]) > MAX_YAW_DEG:
+        c.fail("start[2]", f"the heading must be within +-{MAX_YAW_DEG:,.0f} deg, got {s[2]:g}")
+        return None
     return (s[0], s[1], math.radians(s[2]))
 
 
@@ -567,10 +574,8 @@ def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
         # Finer noise than two cells is aliased on the grid: the ground would not be what was asked.
         c.fail(f"{f}.wavelength_m", f"must be at least two cells (2 x world.resolution_m = {2 * world.resolution_m:g} m)")
         wavelength = None
-    elif wavelength is not None and wavelength > MAX_WAVELENGTH_M:
-        # Hills far wider than any map leave it flat to within the noise's rounding.
-        c.fail(f"{f}.wavelength_m", f"must be at most {MAX_WAVELENGTH_M:g} m")
-        wavelength = None
+    else:
+        wavelength = _within_span(c, wavelength, f"{f}.wavelength_m")
     seed = spec["seed"]
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
         c.fail(f"{f}.seed", f"expected an integer from 0 to 2^63 - 1, got {described(seed)}")
@@ -589,7 +594,8 @@ def _mound(c: _Checker, spec: Any, f: str, world: _World) -> Mound | None:
     if center is not None and max(abs(center[0]), abs(center[1])) > MAX_RELIEF_REACH_M:
         c.fail(f"{f}.center", f"lies more than {MAX_RELIEF_REACH_M:g} m from the map")
         center = None
-    radius = _at_least_cells(c, c.number(spec["radius"], f"{f}.radius", positive=True), f"{f}.radius", 1, world)
+    radius = _within_span(c, c.number(spec["radius"], f"{f}.radius", positive=True), f"{f}.radius")
+    radius = _at_least_cells(c, radius, f"{f}.radius", 1, world)
     height = _relief_height(c, spec["height_m"], f"{f}.height_m")
     if center is None or radius is None or height is None:
         return None
@@ -602,7 +608,8 @@ def _ridge(c: _Checker, spec: Any, f: str, world: _World) -> Ridge | None:
     if spec is None:
         return None
     polyline = _relief_points(c, spec["polyline"], f"{f}.polyline", 2)
-    width = _at_least_cells(c, c.number(spec["width_m"], f"{f}.width_m", positive=True), f"{f}.width_m", 2, world)
+    width = _within_span(c, c.number(spec["width_m"], f"{f}.width_m", positive=True), f"{f}.width_m")
+    width = _at_least_cells(c, width, f"{f}.width_m", 2, world)
     height = _relief_height(c, spec["height_m"], f"{f}.height_m")
     if polyline is None or width is None or height is None:
         return None
@@ -620,11 +627,20 @@ def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
     if edge is not None and edge < 0:
         c.fail(f"{f}.edge_m", "must be >= 0 (0: a vertical step)")
         edge = None
+    edge = _within_span(c, edge, f"{f}.edge_m")
     if edge:  # a slope finer than a cell is a step on the grid: 0 says so
         edge = _at_least_cells(c, edge, f"{f}.edge_m", 1, world, " or 0 (a vertical step)")
     if polygon is None or height is None or edge is None:
         return None
     return Plateau(polygon, height, edge)
+
+
+def _within_span(c: _Checker, value: float | None, field: str) -> float | None:
+    """``value`` [m] where it is at most :data:`MAX_RELIEF_SPAN_M`; else said and None."""
+    if value is not None and value > MAX_RELIEF_SPAN_M:
+        c.fail(field, f"must be at most {MAX_RELIEF_SPAN_M:g} m, as wide as the largest map")
+        return None
+    return value
 
 
 def _at_least_cells(c: _Checker, value: float | None, field: str, cells: int, world: _World, note: str = "") -> float | None:
