@@ -293,8 +293,13 @@ def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup
     opts = NodeOptions().resolved(lambda name, default: params.get(name, default))
     applied = opts.applied_to(robot)
     assert applied.limits.max_speed_mps == 0.8 and applied.limits.max_accel_mps2 == 0.5 and applied.stop.goal_tolerance_m == 0.3
-    with pytest.raises(UserError, match=r"~max_speed_mps: expected a number > 0"):
-        NodeOptions().resolved(lambda name, default: -1.0 if name == "~max_speed_mps" else default)
+    for name, value, said in (
+        ("~max_speed_mps", -1.0, "expected 0.1 to 30, got -1"),
+        ("~max_roll_deg", 0.0, "expected 1 to 89, got 0"),  # a limit's range, as a robot file's, from 0 up as past its top
+        ("~goal_tolerance_m", 0.0, "expected a number > 0, got 0.0"),
+    ):
+        with pytest.raises(UserError, match=f"^{name}: {re.escape(said)}$"):
+            NodeOptions().resolved(lambda n, default, name=name, value=value: value if n == name else default)
     with pytest.raises(UserError, match="~goal_tolerance_m"):  # beyond the off-path distance
         NodeOptions().resolved(lambda name, default: 50.0 if name == "~goal_tolerance_m" else default)
     with pytest.raises(UserError, match=r"~max_speed_mps: expected 0.1 to 30, got 1e\+09"):

@@ -633,10 +633,14 @@ class NodeOptions:
                 f"expected at least 1 / hold_s = {1.0 / values['hold_s']:g} Hz, so that a command held {values['hold_s']:g} s "
                 f"after its frame is followed by a stop within a tick; got {values['rate']!r}",
             )
-        for name in ROBOT_PARAMETERS:
+        for name in ROBOT_PARAMETERS:  # a limit within its range (as a robot file's), the stop's settings > 0
             v = values[name]
-            if v is not None and not (finite_number(v) and v > 0):
-                raise UserError(origin[name], f"expected a number > 0, got {v!r}")
+            if name in LIMITS:
+                problem = limit_problem(name, v) if v is not None else None
+            else:
+                problem = None if v is None or (finite_number(v) and v > 0) else f"expected a number > 0, got {v!r}"
+            if problem is not None:
+                raise UserError(origin[name], problem)
         for name in ("path_file", "cmd_topic"):
             if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
                 raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
