@@ -19,6 +19,42 @@ from terrapref.fileio import atomic_path
 
 META_KEY = "terrapref"
 REASON_CHARS = 160  # the most of a parser's reason an error line quotes
+# The deepest that mappings and lists may lie within one another in a file's metadata: a model's
+# lie 7 deep; far deeper ones would exhaust the readers' recursion.
+MAX_META_DEPTH = 32
+
+
+class _KeyTwice(ValueError):
+    """A mapping of a file's metadata names a key twice (JSON reads the last silently)."""
+
+
+def _no_key_twice(pairs: list[tuple[str, object]]) -> dict:
+    keys = [k for k, _ in pairs]
+    if len(set(keys)) != len(keys):
+        raise _KeyTwice(next(k for k in keys if keys.count(k) > 1))
+    return dict(pairs)
+
+
+def parse_metadata(text: str, source: str) -> object:
+    """A file's JSON metadata, read as written or refused: not JSON (or an integer longer than
+    Python reads), a key named twice in one mapping, or mappings and lists more than
+    :data:`MAX_META_DEPTH` deep. Raises a UserError naming ``source`` and ``metadata``."""
+    try:
+        meta = json.loads(text, object_pairs_hook=_no_key_twice)
+    except _KeyTwice as exc:
+        raise UserError(source, f"names {exc.args[0]!r} twice in one mapping", field="metadata") from None
+    except (ValueError, RecursionError) as exc:
+        reason = "an integer of thousands of digits" if "integer string conversion" in str(exc) else str(exc)
+        reason = reason if len(reason) <= REASON_CHARS else reason[: REASON_CHARS - 3] + "..."
+        raise UserError(source, f"not JSON that can be read ({reason})", field="metadata") from None
+    within = [(meta, 1)]
+    while within:
+        value, depth = within.pop()
+        if isinstance(value, (dict, list)):
+            if depth > MAX_META_DEPTH:
+                raise UserError(source, f"mappings and lists nested more than {MAX_META_DEPTH} deep", field="metadata")
+            within.extend((v, depth + 1) for v in (value.values() if isinstance(value, dict) else value))
+    return meta
 
 
 def write_tensor_file(path: str | Path, tensors: dict[str, np.ndarray], meta: dict) -> Path:
@@ -61,10 +97,9 @@ def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) 
         reason = str(exc)  # a damaged header's reason quotes the header, kilobytes of it
         reason = reason if len(reason) <= REASON_CHARS else reason[: REASON_CHARS - 3] + "..."
         raise UserError(source, f"{unreadable} ({reason})") from None
-    try:
-        meta = json.loads(header[META_KEY])
-    except (KeyError, json.JSONDecodeError):
-        raise UserError(source, "missing terrapref metadata", field="metadata") from None
+    if META_KEY not in header:
+        raise UserError(source, "missing terrapref metadata", field="metadata")
+    meta = parse_metadata(header[META_KEY], source)
     if not isinstance(meta, dict) or meta.get("format") != fmt:
         got = meta.get("format") if isinstance(meta, dict) else None
         raise UserError(source, f"expected {fmt!r}, got {described(got)}", field="format")

@@ -148,6 +148,49 @@ def test_missing_metadata_is_refused(model_file, metadata: dict):
     assert _expect_user_error(path, "metadata").problems[0].field == "metadata"
 
 
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [
+        ("[" * 5000 + "]" * 5000, "not JSON that can be read (maximum recursion depth"),  # beyond the parser's recursion
+        ('{"format": "terrapref-model/1", "deep": ' + "[" * 40 + "]" * 40 + "}", "nested more than 32 deep"),  # beyond the readers'
+        ('{"format": "terrapref-model/1", "steps": 1' + "0" * 5000 + "}", "an integer of thousands of digits"),
+        ('{"format": "terrapref-model/1", "format": "terrapref-model/1"}', "names 'format' twice in one mapping"),
+    ],
+    ids=["parser-depth", "reader-depth", "huge-integer", "key-twice"],
+)
+def test_metadata_json_the_readers_cannot_take_is_refused_in_one_line(model_file, text: str, said: str):
+    path, _, weights = model_file
+    save_file(weights, str(path), metadata={"terrapref": text})
+    assert _expect_user_error(path, said).problems[0].field == "metadata"
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "field", "said"),
+    [
+        ("kind", [1], "kind", "expected the name of a kind of model, got a list of 1"),
+        ("profile", "mud", "profile", "expected a list of class names, most preferred first, got string 'mud'"),
+        ("profile", [1, 2], "profile", "expected a list of class names"),
+        ("profile", ["mud", "mud", "water", "non_traversable"], "profile", "'rock' is missing"),
+        ("profile", ["lava", "rock", "water", "non_traversable"], "profile", "unknown or background class 'lava'"),
+    ],
+)
+def test_a_kind_or_profile_the_file_cannot_mean_is_refused(model_file, key: str, value, field: str, said: str):
+    path, config, weights = model_file
+    header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), key: value}
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    assert _expect_user_error(path, said).problems[0].field == field
+
+
+def test_terrain_columns_not_the_tables_feature_classes_are_refused(model_file):
+    path, config, weights = model_file
+    header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE)}
+    columns = header["features"]["feature_classes"]
+    header["features"]["feature_classes"] = [*columns[:-1], "lava"]
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    err = _expect_user_error(path, f"names {', '.join([*columns[:-1], 'lava'])} where its class table's feature classes are")
+    assert err.problems[0].field == "features.feature_classes"
+
+
 def test_wrong_format_is_refused(model_file):
     path, config, weights = model_file
     header = {"format": "terrapref-model/99", "classifier": config.to_dict(), **model_meta()}

@@ -93,6 +93,18 @@ def test_info_on_a_model_of_nan_weights_shows_it_not_readable_and_exits_2(tmp_pa
     assert captured.err.splitlines() == [f"error: {path}: weights.compress.weight: 1 of its 5 weights are NaN or infinite"]
 
 
+@pytest.mark.parametrize(("profile", "shown"), [([1, 2], "(unreadable)"), (["mud", "mud", "water", "non_traversable"], "(unreadable)")])
+def test_info_on_a_model_whose_profile_is_damaged_shows_it_not_readable_and_exits_2(tmp_path: Path, capsys, profile, shown):
+    config = ClassifierConfig(hidden=8, skip=True)
+    path = tmp_path / "m.safetensors"
+    meta = {"format": MODEL_FORMAT, "kind": "classifier", "classifier": config.to_dict(), **model_meta(), "profile": profile}
+    write_tensor_file(path, skip_path_weights(config), meta)
+    assert main(["info", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert f"{path}: terrapref model (classifier), NOT READABLE: profile: " in captured.out
+    assert f"profile         {shown}" in captured.out and "internal error" not in captured.err
+
+
 def test_info_flags_a_speed_rule_faster_than_the_vehicle(tmp_path: Path, capsys):
     from test_runtime import _model
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.errors import UserError
+from terrapref.errors import UserError, described
 from terrapref.features import FeatureConfig
 from terrapref.learning.header import CLASSIFIER, FORMAT, ModelHeader, model_context, rule_blocks
 from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
@@ -120,6 +120,8 @@ def read_model_file(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
             bad = int(value.size - np.isfinite(value).sum())
             raise UserError(str(path), f"{bad} of its {value.size} weights are NaN or infinite", field=f"weights.{name}")
     meta.setdefault("kind", CLASSIFIER)
+    if not isinstance(meta["kind"], str):
+        raise UserError(str(path), f"expected the name of a kind of model, got {described(meta['kind'])}", field="kind")
     return weights, meta
 
 

@@ -3,7 +3,6 @@ its metadata alone (no tensor is used, no code from the file is run)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from terrapref.errors import UserError
@@ -32,8 +31,10 @@ def _common(meta: dict) -> list[str]:
     pref = features.get("preference") if isinstance(features, dict) else meta.get("preference_set")
     if isinstance(pref, dict):
         out.append(f"preference set  {_preference(pref)}")
-    if isinstance(meta.get("profile"), list):
+    if _named_order(meta.get("profile")):
         out.append(f"profile         {' > '.join(meta['profile'])}")
+    elif meta.get("profile") is not None:
+        out.append("profile         (unreadable)")
     elif isinstance(meta.get("classes"), dict):  # a file of driven frames that names no order: its drives declared none
         out.append("profile         none declared")
     classes = meta.get("classes")
@@ -52,8 +53,13 @@ def _identifiability(meta: dict) -> list[str]:
         report = Identifiability.from_dict(data)
     except (KeyError, TypeError, ValueError):
         return ["identifiability (unreadable)"]
-    profile = meta.get("profile") if isinstance(meta.get("profile"), list) else None
+    profile = meta.get("profile") if _named_order(meta.get("profile")) else None  # a damaged file's is shown only if it reads
     return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines_with_order(profile)]
+
+
+def _named_order(value: object) -> bool:
+    """Whether ``value`` reads as an order of classes: a list of distinct names."""
+    return isinstance(value, list) and all(isinstance(n, str) for n in value) and len(set(value)) == len(value)
 
 
 class NotReadable(UserError):
@@ -175,7 +181,7 @@ def _rules(rules, driving, names: tuple[str, ...], classes, graph_note: bool = F
 
 def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
     """The terrapref metadata of a safetensors file and the shape of each tensor (none is read)."""
-    from terrapref.tensorfile import META_KEY
+    from terrapref.tensorfile import META_KEY, parse_metadata
 
     if not p.is_file():
         raise UserError(str(p), "no such file or recording folder")
@@ -185,9 +191,11 @@ def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
         with safe_open(str(p), framework="numpy") as fh:
             header = fh.metadata() or {}
             shapes = {k: tuple(fh.get_slice(k).get_shape()) for k in fh.keys()}
-        meta = json.loads(header[META_KEY])
-    except (SafetensorError, OSError, ValueError, KeyError):
+    except (SafetensorError, OSError, ValueError):
         raise UserError(str(p), "not a terrapref recording, dataset, model or ONNX file") from None
+    if META_KEY not in header:
+        raise UserError(str(p), "not a terrapref recording, dataset, model or ONNX file (no terrapref metadata)")
+    meta = parse_metadata(header[META_KEY], str(p))
     if not isinstance(meta, dict):
         raise UserError(str(p), "metadata is not a mapping", field="metadata")
     return meta, shapes
