@@ -336,6 +336,12 @@ def test_a_model_file_names_the_rule_that_steers_and_the_one_that_sets_the_speed
         UserError, match="m.safetensors: sets_speed: names rule 'offset' to set the speed, but the speed rule it lists is speed"
     ):
         rules_in({**meta, "sets_speed": "offset"}, "m.safetensors")
+    types = [block["type"] for block in meta["rules"]]
+    for twice in ("offset", "speed"):  # which of two would drive would depend on who reads the file
+        with pytest.raises(UserError) as err:
+            rules_in({**meta, "rules": [*meta["rules"], meta["rules"][types.index(twice)]]}, "m.safetensors")
+        said = f"a second {twice!r} rule (rules[{types.index(twice)}] is one); a file holds one rule of each type"
+        assert err.value.lines() == [f"m.safetensors: rules[{len(types)}].type: {said}"]
 
 
 # --- 7. the registry ---------------------------------------------------------------------------------

@@ -114,7 +114,11 @@ def read_rules(
     rules = []
     for i, block in enumerate(blocks):
         where = Where(source, i, key)
-        rules.append(RULES.get(str(block["type"]), where.field("type"), source).from_header(block, context, where))
+        rule = RULES.get(str(block["type"]), where.field("type"), source).from_header(block, context, where)
+        first = next((j for j, r in enumerate(rules) if r.type == rule.type), None)
+        if first is not None:  # which of two would drive would depend on who reads the file
+            raise where.error("type", f"a second {rule.type!r} rule ({key}[{first}] is one); a file holds one rule of each type")
+        rules.append(rule)
     return tuple(rules)
 
 
