@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from test_offset_rule import CONTROL, DRIVER_LIKE, TREES, _offset_meta, _scenario, _seen_from, _terrain
 from test_speed_rule import MODEL as SPEED_MODEL
 
@@ -160,3 +161,12 @@ def test_the_speed_rule_reads_the_steering_rules_map_whatever_its_settings(tmp_p
     planner = Planner(load_model(save_model(tmp_path / "m.safetensors", classifier, skip_path_weights(classifier), meta)))
     assert planner.ground_map.settings.map_min_evidence == 0.5 and planner.ground_map.settings.map_fade == 0.9
     assert planner.speed is not None and list(planner._maps.values()) == [planner.ground_map]
+
+
+def test_a_map_setting_read_as_true_or_false_takes_nothing_else():
+    """A file's "false" (a string) would read as true: it is refused."""
+    from terrapref.groundmap.settings import MapSettings
+
+    assert MapSettings(map_sky_attitude=False).map_sky_attitude is False
+    with pytest.raises(ValueError, match="map_sky_attitude must be true or false, got 'false'"):
+        MapSettings(map_sky_attitude="false")

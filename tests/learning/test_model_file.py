@@ -5,6 +5,7 @@ for another camera or preference set)."""
 from __future__ import annotations
 
 import json
+import math
 import pickle
 import struct
 from dataclasses import replace
@@ -220,6 +221,15 @@ def test_invalid_configuration_is_refused(model_file):
     header = {"format": FORMAT, "classifier": {**config.to_dict(), "activation": "sigmoid"}, **model_meta()}
     save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
     _expect_user_error(path, "activation")
+
+
+@pytest.mark.parametrize("v_mps", [1e9, math.inf, 0.0])
+def test_a_control_set_faster_than_any_robot_is_refused(model_file, v_mps: float):
+    path, config, weights = model_file
+    header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE)}
+    header["features"]["preference"]["control"]["v_mps"] = v_mps
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    assert _expect_user_error(path, "v_mps must be > 0 and at most 30 m/s").problems[0].field == "metadata"
 
 
 @pytest.mark.parametrize("change", ["missing", "extra"])

@@ -727,6 +727,7 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         ({"shown_deg": [13.0, None]}, "rules[0].relief.shown_deg"),
         ({"price_interval": [[1.0, 0.0]] * 20}, "rules[0].relief.price_interval"),
         ({"price_interval": [[0.0, math.nan]] * 20}, "rules[0].relief.price_interval"),
+        ({"price_interval": [[-50.0, -40.0]] * 20}, "rules[0].relief.price_interval"),  # a price is never below 0
         ({"price_interval": [[0.0, 1.0]] * 3}, "rules[0].relief.price_interval"),
         ({"price_interval": [["0", "1"]] * 20}, "rules[0].relief.price_interval"),
         ({"price_interval": [[0, 10**400]] * 20}, "rules[0].relief.price_interval"),  # past what a float holds

@@ -79,3 +79,5 @@ class MapSettings:
                 "the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "
                 "and map_min_evidence >= 0"
             )
+        if not isinstance(self.map_sky_attitude, bool):  # a file's "false" would read as true
+            raise ValueError(f"the ground map's map_sky_attitude must be true or false, got {self.map_sky_attitude!r}")

@@ -10,6 +10,8 @@ from numba import njit
 
 from terrapref.records import to_plain
 
+MOST_V_MPS = 30.0  # the fastest a control set's commands may be [m/s]: a robot file's top speed at most
+
 
 @dataclass(frozen=True)
 class ControlSet:
@@ -27,8 +29,8 @@ class ControlSet:
         w = np.asarray(self.w_rps)
         if len(w) < 2 or not np.all(np.isfinite(w)) or not np.all(np.diff(w) > 0):
             raise ValueError("w_rps must have at least 2 finite, strictly ascending values")
-        if not self.v_mps > 0:
-            raise ValueError("v_mps must be > 0")
+        if not (math.isfinite(self.v_mps) and 0 < self.v_mps <= MOST_V_MPS):
+            raise ValueError(f"v_mps must be > 0 and at most {MOST_V_MPS:g} m/s")
         object.__setattr__(self, "_grid", np.asarray(self.w_rps, dtype=float))  # label_of's, made once
 
     @classmethod

@@ -471,8 +471,8 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
     interval = None
     if "price_interval" in relief:
         interval = finite_array(relief["price_interval"], (len(weights), 2))
-        if interval is None or (interval[:, 0] > interval[:, 1]).any():
-            raise where.error("relief.price_interval", f"expected {len(weights)} pairs of finite numbers, low then high")
+        if interval is None or (interval[:, 0] > interval[:, 1]).any() or (interval < 0).any():  # a price is never below 0
+            raise where.error("relief.price_interval", f"expected {len(weights)} pairs of finite numbers >= 0, low then high")
     return weights, (roll, grade), interval
 
 

@@ -257,6 +257,10 @@ def _to_world(points: np.ndarray, pose: Pose) -> np.ndarray:
 
 # The most a degree of grade may shed in a model file [m/s per deg]: a top speed of 2 m/s gone in 2 deg.
 MAX_SHED_MPS_PER_DEG = 1.0
+# The fastest a model file's speeds may be [m/s]: a robot file's top speed at most (a robot's log may be fast).
+MOST_MPS = 30.0
+# The range a model file's lateral accelerations may lie in [m/s^2], as a robot file's accelerations.
+LATERAL_MPS2 = (0.05, 50.0)
 
 
 @dataclass(frozen=True)
@@ -351,14 +355,22 @@ class SpeedRule(Rule):
     def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> SpeedRule:
         k = context.features.n_terrain
         speeds = block.get("speeds_mps")
-        if not (isinstance(speeds, list) and len(speeds) == k + 1 and all(finite_number(v) and v > 0 for v in speeds)):
-            raise where.error("speeds_mps", f"expected {k + 1} cruising speeds > 0 [m/s], one per terrain column and the background")
+        if not (
+            isinstance(speeds, list) and len(speeds) == k + 1 and all(finite_number(v) and MIN_SPEED_MPS <= v <= MOST_MPS for v in speeds)
+        ):
+            raise where.error(
+                "speeds_mps",
+                f"expected {k + 1} cruising speeds of {MIN_SPEED_MPS:g} to {MOST_MPS:g} m/s, one per terrain column and the background",
+            )
         lethal = block.get("lethal", [])
-        if not (isinstance(lethal, list) and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= k for c in lethal)):
-            raise where.error("lethal", f"expected terrain columns 0..{k}")
+        if not (isinstance(lethal, list) and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c < k for c in lethal)):
+            raise where.error("lethal", f"expected terrain columns 0..{k - 1} (column {k} is the background, never lethal)")
         optional = _optional_fields(block, where)
+        top = number(block, "max_speed_mps", where, 2.0)
+        if not MIN_SPEED_MPS <= top <= MOST_MPS:
+            raise where.error("max_speed_mps", f"expected {MIN_SPEED_MPS:g} to {MOST_MPS:g} m/s, got {top:g}")
         try:
-            config = SpeedConfig(number(block, "half_width_m", where, 0.6), number(block, "max_speed_mps", where, 2.0))
+            config = SpeedConfig(number(block, "half_width_m", where, 0.6), top)
         except ValueError as exc:
             raise where.error("", str(exc)) from None
         model = SpeedModel(
@@ -369,13 +381,14 @@ class SpeedRule(Rule):
             optional["near_lethal_mps"],
             tuple(lethal),
             _points(block, where),
-            None if block.get("drive_lateral_mps2") is None else number(block, "drive_lateral_mps2", where, positive=True),
+            optional["drive_lateral_mps2"],
             optional["up_mps_per_deg"],
             optional["down_mps_per_deg"],
             optional["rough_m"],
             optional["rough_mps"],
             _grades_across(block, where),
         )
+        _intervals_in_order(block, where)
         fit = None
         intervals = block.get("intervals_mps")
         if isinstance(intervals, list) and len(intervals) == k + 1:
@@ -491,8 +504,12 @@ def _optional_fields(block: Mapping[str, Any], where: Where) -> dict[str, float 
     """A speed rule block's fields a drive may not have fitted (None where absent), each checked
     against what a drive can show (a UserError naming the field)."""
     optional = {}
-    for name in ("lateral_accel_mps2", "near_lethal_m", "near_lethal_mps"):
+    for name in ("lateral_accel_mps2", "drive_lateral_mps2", "near_lethal_m", "near_lethal_mps"):
         optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
+    ranges = {"lateral_accel_mps2": LATERAL_MPS2, "drive_lateral_mps2": LATERAL_MPS2, "near_lethal_mps": (MIN_SPEED_MPS, MOST_MPS)}
+    for name, (least, most) in ranges.items():
+        if optional[name] is not None and not least <= optional[name] <= most:
+            raise where.error(name, f"expected {least:g} to {most:g}, got {optional[name]:g}")
     for name in ("up_mps_per_deg", "down_mps_per_deg"):  # absent from a flat drive's file
         optional[name] = None if block.get(name) is None else number(block, name, where, low=0.0)
     for name in ("rough_m", "rough_mps"):  # likewise
@@ -502,7 +519,12 @@ def _optional_fields(block: Mapping[str, Any], where: Where) -> dict[str, float 
     if optional["rough_mps"] is not None and optional["rough_mps"] < MIN_SPEED_MPS:
         raise where.error("rough_mps", f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
     # Past what any drive shows (a robot's log may be fast: 30 m/s, a robot file's top speed at most).
-    bounds = (("up_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("down_mps_per_deg", MAX_SHED_MPS_PER_DEG), ("rough_m", 1.0), ("rough_mps", 30.0))
+    bounds = (
+        ("up_mps_per_deg", MAX_SHED_MPS_PER_DEG),
+        ("down_mps_per_deg", MAX_SHED_MPS_PER_DEG),
+        ("rough_m", 1.0),
+        ("rough_mps", MOST_MPS),
+    )
     for name, most in bounds:
         if optional[name] is not None and optional[name] > most:  # past what a drive shows: a file written by hand
             raise where.error(name, f"expected at most {most:g}, got {optional[name]:g}")
@@ -514,6 +536,16 @@ def _interval_of(value: object) -> tuple[float, float] | None:
     return (
         (float(value[0]), float(value[1])) if isinstance(value, list) and len(value) == 2 and all(finite_number(x) for x in value) else None
     )
+
+
+def _intervals_in_order(block: Mapping[str, Any], where: Where) -> None:
+    """Every interval a speed rule block keeps reads low then high (a UserError naming the field)."""
+    kept = {name: block.get(name) for name in ("intervals_mps", "grade_intervals")}
+    for name, value in {**kept, "rough_interval": [block.get("rough_interval")], "rough_alike_m": [block.get("rough_alike_m")]}.items():
+        for pair in value if isinstance(value, list) else []:
+            interval = _interval_of(pair)
+            if interval is not None and interval[0] > interval[1]:
+                raise where.error(name, f"an interval reads high then low: {interval[0]:g} to {interval[1]:g}")
 
 
 def _grade_intervals(value: object) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
