@@ -259,8 +259,9 @@ def _to_world(points: np.ndarray, pose: Pose) -> np.ndarray:
 MAX_SHED_MPS_PER_DEG = 1.0
 # The fastest a model file's speeds may be [m/s]: a robot file's top speed at most (a robot's log may be fast).
 MOST_MPS = 30.0
-# The range a model file's lateral accelerations may lie in [m/s^2], as a robot file's accelerations.
-LATERAL_MPS2 = (0.05, 50.0)
+# The most a model file's lateral accelerations may be [m/s^2], as a robot file's accelerations (a
+# straight drive shows next to none, and is kept to it).
+MOST_LATERAL_MPS2 = 50.0
 
 
 @dataclass(frozen=True)
@@ -506,7 +507,11 @@ def _optional_fields(block: Mapping[str, Any], where: Where) -> dict[str, float 
     optional = {}
     for name in ("lateral_accel_mps2", "drive_lateral_mps2", "near_lethal_m", "near_lethal_mps"):
         optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
-    ranges = {"lateral_accel_mps2": LATERAL_MPS2, "drive_lateral_mps2": LATERAL_MPS2, "near_lethal_mps": (MIN_SPEED_MPS, MOST_MPS)}
+    ranges = {
+        "lateral_accel_mps2": (0.0, MOST_LATERAL_MPS2),
+        "drive_lateral_mps2": (0.0, MOST_LATERAL_MPS2),
+        "near_lethal_mps": (MIN_SPEED_MPS, MOST_MPS),
+    }
     for name, (least, most) in ranges.items():
         if optional[name] is not None and not least <= optional[name] <= most:
             raise where.error(name, f"expected {least:g} to {most:g}, got {optional[name]:g}")
