@@ -434,6 +434,13 @@ def test_an_ensemble_whose_header_disagrees_with_its_members_is_refused(tmp_path
     assert err.problems[0].field == "classifier.members"
 
 
+def test_an_ensemble_whose_members_are_numbered_otherwise_is_refused_saying_so(tmp_path: Path):
+    one = ClassifierConfig(hidden=8)
+    weights = {f"members.{j}.{k}": v for j in (0, 1, 3) for k, v in random_weights(one, j).items()}
+    path = save_model(tmp_path / "m.safetensors", replace(one, members=3), weights, model_meta())
+    _expect_user_error(path, "classifier.members: header says 3 member(s), numbered 0 to 2; the weights hold members 0, 1, 3")
+
+
 def test_a_member_missing_a_weight_is_refused(tmp_path: Path):
     one = ClassifierConfig(hidden=8)
     weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(one, j).items()}

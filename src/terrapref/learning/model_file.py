@@ -151,9 +151,11 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
     members = {name.split(".")[1] for name in weights if name.startswith(f"{MEMBERS}.")}
     claimed = classifier.members if classifier.members > 1 else 0  # counted first: a huge claim is refused at once
     if len(members) != claimed or members != {str(j) for j in range(claimed)}:
-        raise UserError(
-            source, f"header says {classifier.members} member(s), the weights hold {len(members) or 1}", field="classifier.members"
-        )
+        said = f"header says {classifier.members} member(s), the weights hold {len(members) or 1}"
+        if len(members) == claimed:  # as many, numbered otherwise
+            held = ", ".join(sorted(members, key=lambda m: (len(m), m)))
+            said = f"header says {claimed} member(s), numbered 0 to {claimed - 1}; the weights hold members {held}"
+        raise UserError(source, said, field="classifier.members")
     expected = expected_shapes(classifier)
     if set(weights) != set(expected):
         raise UserError(
