@@ -735,6 +735,8 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         ({"weights": [True] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"extra": 1}, "rules[0].relief"),
         ({"hidden_on_path": math.nan}, "rules[0].relief.hidden_on_path"),
+        ({"hidden_on_path": -1e308}, "rules[0].relief.hidden_on_path"),  # finite, but the utility's sums overflow
+        ({"weights": [-1e308] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"hidden_on_path": "1"}, "rules[0].relief.hidden_on_path"),
         (
             {"weights": [0.0] * 9 + [5.0] + [0.0] * 10},

@@ -358,8 +358,19 @@ SPEEDS_SAID = "expected 5 cruising speeds of 0.1 to 30 m/s, one per terrain colu
         ({"lateral_accel_mps2": 1e3}, "lateral_accel_mps2", "expected 0 to 50, got 1000"),
         ({"near_lethal_m": 1.0, "near_lethal_mps": 1e9}, "near_lethal_mps", "expected 0.1 to 30, got 1e+09"),
         ({"intervals_mps": [None, [9.0, -3.0], None, None, None]}, "intervals_mps", "an interval reads high then low: 9 to -3"),
+        ({"preview_m": 1e308}, "preview_m", "expected a number within +-1e+09, got 1e+308"),
     ],
-    ids=["crawl", "past-any-robot", "background-lethal", "top-crawl", "drive-sideways-past", "sideways-past", "near-lethal", "interval"],
+    ids=[
+        "crawl",
+        "past-any-robot",
+        "background-lethal",
+        "top-crawl",
+        "drive-sideways-past",
+        "sideways-past",
+        "near-lethal",
+        "interval",
+        "past-any-number",
+    ],
 )
 def test_a_speed_block_past_what_a_drive_or_a_robot_shows_is_refused(change: dict, field: str, said: str):
     """A file edited to crawl (a vehicle that never gets anywhere), to drive past any robot's

@@ -340,11 +340,19 @@ class Where:
         return UserError(self.source, message, field=self.field(name))
 
 
+# The largest number a rule's block may hold, either way: no fitted weight, price, speed or count
+# comes near it, and past it the utility's sums and the lines that print them overflow.
+MOST_NUMBER = 1e9
+
+
 def number(
     block: Mapping[str, Any], name: str, where: Where, default: float | None = None, low: float = -np.inf, positive: bool = False
 ) -> float:
-    """A finite number field of a block (``default`` when absent, if given), >= ``low`` (> 0 with ``positive``)."""
+    """A finite number field of a block (``default`` when absent, if given), >= ``low`` (> 0 with
+    ``positive``), within :data:`MOST_NUMBER` either way."""
     value = block.get(name, default)
+    if finite_number(value) and abs(value) > MOST_NUMBER:
+        raise where.error(name, f"expected a number within +-{MOST_NUMBER:g}, got {value:g}")
     ok = finite_number(value) and value >= low
     if not ok or (positive and value <= 0):
         raise where.error(
@@ -360,14 +368,14 @@ def vector(block: Mapping[str, Any], name: str, size: int, where: Where) -> np.n
     """A field of ``size`` finite numbers."""
     value = finite_array(block.get(name), (size,))
     if value is None:
-        raise where.error(name, f"expected {size} finite numbers")
+        raise where.error(name, f"expected {size} finite numbers within +-{MOST_NUMBER:g}")
     return value
 
 
 def finite_array(value: Any, shape: tuple[int, ...]) -> np.ndarray | None:
     """``value`` (nested lists of numbers, as a file's JSON holds them) as a float array of
     ``shape``; None where it is not one: another shape, an entry not a number (a string, a
-    boolean), or one not finite or past what a float holds."""
+    boolean), or one not finite, past what a float holds or past :data:`MOST_NUMBER` either way."""
 
     def numbers(v: Any) -> bool:
         return all(numbers(x) for x in v) if isinstance(v, list) else isinstance(v, (int, float)) and not isinstance(v, bool)
@@ -378,4 +386,4 @@ def finite_array(value: Any, shape: tuple[int, ...]) -> np.ndarray | None:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
         return None
-    return array if array.shape == shape and np.isfinite(array).all() else None
+    return array if array.shape == shape and np.isfinite(array).all() and (np.abs(array) <= MOST_NUMBER).all() else None

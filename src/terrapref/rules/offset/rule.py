@@ -66,6 +66,7 @@ from terrapref.groundmap.height import DepthImage
 from terrapref.groundmap.map import GroundMap
 from terrapref.records import to_plain
 from terrapref.rules.base import (
+    MOST_NUMBER,
     Choice,
     FrameReader,
     HeaderContext,
@@ -466,7 +467,9 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
         raise where.error("relief.bands_deg", f"expected the bands this version reads, {list(RELIEF_BANDS_DEG)}")
     weights = finite_array(relief["weights"], (2 * len(RELIEF_BANDS_DEG),))
     if weights is None or (weights > 0.0).any():  # each band adds a price, as the fit keeps them (steeper never costs less)
-        raise where.error("relief.weights", f"expected {2 * len(RELIEF_BANDS_DEG)} finite numbers, each at most 0")
+        raise where.error(
+            "relief.weights", f"expected {2 * len(RELIEF_BANDS_DEG)} finite numbers, each at most 0 and within -{MOST_NUMBER:g}"
+        )
     roll, grade = (math.nan if v is None else float(v) for v in shown)
     interval = None
     if "price_interval" in relief:
@@ -479,8 +482,8 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
 def _hidden_on_path(block: Mapping[str, Any], where: Where) -> float:
     """The relief block's ``hidden_on_path`` (0 in a file written before it was fitted)."""
     value = block["relief"].get("hidden_on_path", 0.0)
-    if not finite_number(value):
-        raise where.error("relief.hidden_on_path", "expected a finite number")
+    if not (finite_number(value) and abs(value) <= MOST_NUMBER):
+        raise where.error("relief.hidden_on_path", f"expected a finite number within +-{MOST_NUMBER:g}")
     return float(value)
 
 

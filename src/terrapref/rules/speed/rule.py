@@ -27,6 +27,7 @@ from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
 from terrapref.rules.base import (
+    MOST_NUMBER,
     SPEED,
     Choice,
     FrameReader,
@@ -565,7 +566,8 @@ def _rough_shown(block: Mapping[str, Any]) -> Rough | None:
         return None
     frames = block["rough_frames"]
     alike = _interval_of(block.get("rough_alike_m"))
-    return Rough(int(frames) if finite_number(frames) and frames >= 0 else 0, _interval_of(block.get("rough_interval")), alike)
+    counted = finite_number(frames) and 0 <= frames <= MOST_NUMBER
+    return Rough(int(frames) if counted else 0, _interval_of(block.get("rough_interval")), alike)
 
 
 def _grade_frames(value: object) -> tuple[int, int]:
