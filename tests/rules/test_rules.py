@@ -344,6 +344,29 @@ def test_a_model_file_names_the_rule_that_steers_and_the_one_that_sets_the_speed
         assert err.value.lines() == [f"m.safetensors: rules[{len(types)}].type: {said}"]
 
 
+def test_a_speed_rule_slowing_for_a_column_the_class_table_calls_safe_is_refused(tmp_path):
+    """The speed rule keeps off its lethal columns; a file whose table has no lethal class but
+    whose rule lists one would slow on that class everywhere. A rule listing none (files older
+    than lethal columns) reads with any table."""
+    from test_interop import speed_block
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+    from helpers import skip_path_weights
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    meta = _offset_meta(DRIVER_LIKE)
+    table = meta["classes"]
+    rules = [*meta["rules"], {**speed_block(1.0), "lethal": [0]}]
+    load_model(save_model(tmp_path / "ok.safetensors", config, skip_path_weights(config), {**meta, "rules": rules}))
+    lethal_column = meta["features"]["feature_classes"][0]
+    safe = {**table, "lethal": []}
+    profile = [name for name in meta["profile"] if name != lethal_column] + [lethal_column]
+    meta_safe = {**meta, "classes": safe, "rules": rules, "profile": profile}
+    with pytest.raises(UserError) as err:
+        Planner(load_model(save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), meta_safe)))
+    assert err.value.lines()[0].endswith(f"rules[{len(rules) - 1}].lethal: column 0 is not lethal in the file's class table")
+
+
 SPEEDS_SAID = "expected 5 cruising speeds of 0.1 to 30 m/s, one per terrain column and the background"
 
 
