@@ -597,7 +597,10 @@ def save_intervals(
         target = float(target[0])
     if isinstance(target, (int, float)):
         ax.axhline(target, color="grey", ls=":")
-        ax.text(len(labels) - 0.5, target, f"target {target:.0%}", ha="right", va="bottom", fontsize=8, color="dimgrey")
+        # Beside the axes, to the right, where no point's written rate can fall on it.
+        ax.text(
+            1.01, target, f"target\n{target:.0%}", transform=ax.get_yaxis_transform(), ha="left", va="center", fontsize=8, color="dimgrey"
+        )
         bottom = min(bottom, target)
     elif target is not None:
         targets = [float(t) for t in target]
