@@ -182,6 +182,14 @@ def test_a_kind_or_profile_the_file_cannot_mean_is_refused(model_file, key: str,
     assert _expect_user_error(path, said).problems[0].field == field
 
 
+def test_an_older_files_profile_with_the_lethal_column_before_others_reads_as_written(model_file):
+    path, config, weights = model_file
+    older = ["water", "non_traversable", "rock", "mud"]  # written before the lethal column had to come last
+    header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), "profile": older}
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    assert load_model(path).profile == tuple(older)
+
+
 def test_terrain_columns_not_the_tables_feature_classes_are_refused(model_file):
     path, config, weights = model_file
     header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE)}

@@ -367,28 +367,26 @@ def test_a_speed_rule_slowing_for_a_column_the_class_table_calls_safe_is_refused
     assert err.value.lines()[0].endswith(f"rules[{len(rules) - 1}].lethal: column 0 is not lethal in the file's class table")
 
 
-SPEEDS_SAID = "expected 5 cruising speeds of 0.1 to 30 m/s, one per terrain column and the background"
+SPEEDS_SAID = "expected 5 cruising speeds > 0 and at most 50 m/s, one per terrain column and the background"
 
 
 @pytest.mark.parametrize(
     ("change", "field", "said"),
     [
-        ({"speeds_mps": [1e-9, 1.0, 1.0, 1.0, 1.0]}, "speeds_mps", SPEEDS_SAID),
+        ({"speeds_mps": [0.0, 1.0, 1.0, 1.0, 1.0]}, "speeds_mps", SPEEDS_SAID),
         ({"speeds_mps": [1e9, 1.0, 1.0, 1.0, 1.0]}, "speeds_mps", SPEEDS_SAID),
         ({"lethal": [0, 4]}, "lethal", "expected terrain columns 0..3 (column 4 is the background, never lethal)"),
-        ({"max_speed_mps": 1e-9}, "max_speed_mps", "expected 0.1 to 30 m/s, got 1e-09"),
-        ({"drive_lateral_mps2": 1e3}, "drive_lateral_mps2", "expected 0 to 50, got 1000"),
-        ({"lateral_accel_mps2": 1e3}, "lateral_accel_mps2", "expected 0 to 50, got 1000"),
-        ({"near_lethal_m": 1.0, "near_lethal_mps": 1e9}, "near_lethal_mps", "expected 0.1 to 30, got 1e+09"),
+        ({"max_speed_mps": 1e-9}, "max_speed_mps", "expected 0.1 to 50 m/s, got 1e-09"),
+        ({"lateral_accel_mps2": 1e300}, "lateral_accel_mps2", "expected a number within +-1e+09, got 1e+300"),
+        ({"near_lethal_m": 1.0, "near_lethal_mps": 1e3}, "near_lethal_mps", "expected at most 50 m/s, got 1000"),
         ({"intervals_mps": [None, [9.0, -3.0], None, None, None]}, "intervals_mps", "an interval reads high then low: 9 to -3"),
         ({"preview_m": 1e308}, "preview_m", "expected a number within +-1e+09, got 1e+308"),
     ],
     ids=[
-        "crawl",
+        "standing",
         "past-any-robot",
         "background-lethal",
         "top-crawl",
-        "drive-sideways-past",
         "sideways-past",
         "near-lethal",
         "interval",
@@ -396,13 +394,15 @@ SPEEDS_SAID = "expected 5 cruising speeds of 0.1 to 30 m/s, one per terrain colu
     ],
 )
 def test_a_speed_block_past_what_a_drive_or_a_robot_shows_is_refused(change: dict, field: str, said: str):
-    """A file edited to crawl (a vehicle that never gets anywhere), to drive past any robot's
-    speed, or to slow on its background everywhere is refused, naming the field."""
+    """A file edited to stand (a vehicle that never gets anywhere), to drive past any robot's
+    speed, or to slow on its background everywhere is refused, naming the field. Slower than the
+    least cruising speed reads (a log's standing noise may fit so; the rule drives it at that speed)."""
     from test_interop import speed_block
     from test_offset_rule import DRIVER_LIKE, _offset_meta
 
     meta = _offset_meta(DRIVER_LIKE)
-    rules_in({**meta, "rules": [*meta["rules"], speed_block(1.0)]}, "m.safetensors")  # as written, read
+    for v_mps in (1.0, 0.005):  # as written, read
+        rules_in({**meta, "rules": [*meta["rules"], speed_block(v_mps)]}, "m.safetensors")
     with pytest.raises(UserError) as err:
         rules_in({**meta, "rules": [*meta["rules"], {**speed_block(1.0), **change}]}, "m.safetensors")
     assert err.value.lines() == [f"m.safetensors: rules[{len(meta['rules'])}].{field}: {said}"]

@@ -217,13 +217,18 @@ def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, 
 
 
 def _profile(value: Any, classes: ClassTable, source: str) -> tuple[str, ...]:
-    """A file's declared preference order, checked as ``--profile`` is against its class table."""
+    """A file's declared preference order: each of its class table's terrain columns once, as
+    ``--profile`` is checked. Where the lethal column stands is left to the commands that score by
+    the order (files written before it had to come last read as written)."""
     if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
         raise UserError(source, f"expected a list of class names, most preferred first, got {described(value)}", field="profile")
+    lethal = classes.lethal_column
+    lethal_last = [n for n in value if n != lethal] + [n for n in value if n == lethal]
     try:
-        return PreferenceProfile.parse(value, classes, source=source).order
+        PreferenceProfile.parse(lethal_last, classes, source=source)
     except ConfigError as exc:
         raise UserError(source, exc.problems[0].message, field="profile") from None
+    return tuple(value)
 
 
 def rule_blocks(meta: Mapping[str, Any], key: str, source: str) -> tuple[Block, ...] | None:

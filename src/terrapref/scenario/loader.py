@@ -31,10 +31,10 @@ _SHAPE_KEYS = ("polygon", "circle", "rectangle")
 MAX_RELIEF_M = 1000.0  # the largest height or noise amplitude of one relief entry [m]
 MIN_RELIEF_M = 0.001  # the least, either way: finer relief changes no height a vehicle or a depth camera tells [m]
 MAX_RELIEF_REACH_M = 1e6  # relief's points lie within this distance of the map [m]
-# The widest a relief entry's sizes may be (a noise's wavelength, a mound's radius, a ridge's width,
-# a plateau's ramp) [m]: the width of the largest map at 1 m cells (MAX_CELLS). Far wider ones
-# change the heights of a map by less than their rounding, and a file that gives one means something else.
-MAX_RELIEF_SPAN_M = 1e4
+MAX_WAVELENGTH_M = 1e4  # the longest wavelength of noise [m]
+# The widest a mound's radius, a ridge's width or a plateau's ramp may be [m]: as far as relief's
+# points may lie from the map. A file giving 1e308 m raised the whole map by one constant.
+MAX_RELIEF_SPAN_M = MAX_RELIEF_REACH_M
 MAX_YAW_DEG = 1e6  # the largest start heading a file may give, either way [deg]
 
 
@@ -574,8 +574,10 @@ def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
         # Finer noise than two cells is aliased on the grid: the ground would not be what was asked.
         c.fail(f"{f}.wavelength_m", f"must be at least two cells (2 x world.resolution_m = {2 * world.resolution_m:g} m)")
         wavelength = None
-    else:
-        wavelength = _within_span(c, wavelength, f"{f}.wavelength_m")
+    elif wavelength is not None and wavelength > MAX_WAVELENGTH_M:
+        # Hills far wider than any map leave it flat to within the noise's rounding.
+        c.fail(f"{f}.wavelength_m", f"must be at most {MAX_WAVELENGTH_M:g} m")
+        wavelength = None
     seed = spec["seed"]
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
         c.fail(f"{f}.seed", f"expected an integer from 0 to 2^63 - 1, got {described(seed)}")
@@ -638,7 +640,7 @@ def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
 def _within_span(c: _Checker, value: float | None, field: str) -> float | None:
     """``value`` [m] where it is at most :data:`MAX_RELIEF_SPAN_M`; else said and None."""
     if value is not None and value > MAX_RELIEF_SPAN_M:
-        c.fail(field, f"must be at most {MAX_RELIEF_SPAN_M:g} m, as wide as the largest map")
+        c.fail(field, f"must be at most {MAX_RELIEF_SPAN_M:g} m, as far as relief may lie from the map")
         return None
     return value
 

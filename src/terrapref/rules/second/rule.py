@@ -28,6 +28,7 @@ from terrapref.features import UtilityFeaturizer
 from terrapref.learning import exact
 from terrapref.learning.linear import LinearUtility
 from terrapref.rules.base import (
+    MOST_NUMBER,
     Choice,
     FrameReader,
     HeaderContext,
@@ -84,11 +85,11 @@ class SecondStageConfig(RuleConfig):
             math.isfinite(self.after_s)
             and self.after_s > 0
             and math.isfinite(self.weight)
-            and self.weight >= 0
+            and 0 <= self.weight <= MOST_NUMBER  # as its file's block is read back
             and self.candidates >= 1
             and self.stride >= 1
         ):
-            raise ValueError("the second stage needs after_s > 0, weight >= 0, candidates >= 1 and stride >= 1")
+            raise ValueError(f"the second stage needs after_s > 0, weight 0 to {MOST_NUMBER:g}, candidates >= 1 and stride >= 1")
 
     @property
     def lookahead_config(self) -> LookaheadConfig:
