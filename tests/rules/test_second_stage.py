@@ -309,3 +309,10 @@ def test_the_compiled_stage_gives_the_numpy_forms_bits(setup):
         expected = _numpy_scores(stage, log_probs, image, pose, path, s)
         got = stage.scores(log_probs, SegmentationView.of(image), pose, path, s)
         assert np.array_equal(got.view(np.int64), expected.view(np.int64)), trial
+
+
+def test_a_second_stage_weight_past_what_its_file_reads_back_is_refused():
+    """``train --stage-weight 2e9`` wrote a file whose block was then refused as read."""
+    SecondStageConfig(weight=1e9)
+    with pytest.raises(ValueError, match=r"weight 0 to 1e\+09"):
+        SecondStageConfig(weight=2e9)
