@@ -26,6 +26,7 @@ from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 from terrapref.terrain.classes import ForeignIds
+from terrapref.terrain.profile import check_columns, declared_order
 from terrapref.world import rasterise
 
 FORMAT = "terrapref-dataset/2"
@@ -438,7 +439,7 @@ def load_dataset(path: str | Path) -> Dataset:
     try:
         features = FeatureConfig.from_dict(meta["features"])
         CameraConfig.from_dict(meta["camera"])
-        ClassTable.from_dict(meta["classes"], str(path))
+        classes = ClassTable.from_dict(meta["classes"], str(path))
     except KeyError as exc:
         raise UserError(str(path), "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError, AttributeError) as exc:
@@ -451,8 +452,9 @@ def load_dataset(path: str | Path) -> Dataset:
             f"as its features say; got {tensors['U'].shape[1]} x {tensors['U'].shape[2]}",
             field="U",
         )
-    if not (meta.get("profile") is None or isinstance(meta.get("profile"), list)):  # None: the drives declared none
-        raise UserError(str(path), "expected a list of class names", field="profile")
+    check_columns(features.feature_classes, classes, str(path))
+    if meta.get("profile") is not None:  # None: the drives declared none
+        declared_order(meta["profile"], classes, str(path))
     rules = _rule_arrays(tensors, meta, str(path))
     return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, rules)
 

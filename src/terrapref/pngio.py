@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -35,10 +36,21 @@ def millimetres_to_depth(mm: np.ndarray) -> np.ndarray:
     return np.where(mm > 0, mm.astype(np.float32) / np.float32(1000.0), np.float32(np.nan)).astype(np.float32)
 
 
+def _open_png(path: str | Path) -> Image.Image:
+    """``path`` opened, refused (a ValueError) where its pixels are more than a decompression
+    bomb's (Pillow's limit: a camera's image is far smaller), before they are decoded."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Image.DecompressionBombWarning)
+        try:
+            return Image.open(path)
+        except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
+            raise ValueError(f"{path}: {exc}") from None
+
+
 def read_depth_png(path: str | Path) -> np.ndarray:
     """A 16-bit single-channel PNG of millimetres (0: no return; :func:`depth_to_millimetres`'s)
     as a depth image (H, W) float32 [m, NaN where nothing is seen]."""
-    with Image.open(path) as im:
+    with _open_png(path) as im:
         if im.mode not in ("I;16", "I;16B", "I;16L"):
             raise ValueError(f"{path}: expected a single-channel 16-bit PNG, got mode {im.mode}")
         return millimetres_to_depth(np.asarray(im, dtype=np.uint16))
@@ -111,7 +123,7 @@ def preview_with_legend(labels: np.ndarray, classes: ClassTable) -> np.ndarray:
 
 def read_label_png(path: str | Path) -> np.ndarray:
     """A single-channel 8-bit PNG as a (H, W) uint8 array."""
-    with Image.open(path) as im:
+    with _open_png(path) as im:
         if im.mode != "L":
             raise ValueError(f"{path}: expected a single-channel 8-bit PNG, got mode {im.mode}")
         return np.asarray(im, dtype=np.uint8)

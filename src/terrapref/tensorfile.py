@@ -35,24 +35,24 @@ def _no_key_twice(pairs: list[tuple[str, object]]) -> dict:
     return dict(pairs)
 
 
-def parse_metadata(text: str, source: str) -> object:
+def parse_metadata(text: str, source: str, field: str = "metadata") -> object:
     """A file's JSON metadata, read as written or refused: not JSON (or an integer longer than
     Python reads), a key named twice in one mapping, or mappings and lists more than
-    :data:`MAX_META_DEPTH` deep. Raises a UserError naming ``source`` and ``metadata``."""
+    :data:`MAX_META_DEPTH` deep. Raises a UserError naming ``source`` and ``field``."""
     try:
         meta = json.loads(text, object_pairs_hook=_no_key_twice)
     except _KeyTwice as exc:
-        raise UserError(source, f"names {exc.args[0]!r} twice in one mapping", field="metadata") from None
+        raise UserError(source, f"names {exc.args[0]!r} twice in one mapping", field=field) from None
     except (ValueError, RecursionError) as exc:
         reason = "an integer of thousands of digits" if "integer string conversion" in str(exc) else str(exc)
         reason = reason if len(reason) <= REASON_CHARS else reason[: REASON_CHARS - 3] + "..."
-        raise UserError(source, f"not JSON that can be read ({reason})", field="metadata") from None
+        raise UserError(source, f"not JSON that can be read ({reason})", field=field) from None
     within = [(meta, 1)]
     while within:
         value, depth = within.pop()
         if isinstance(value, (dict, list)):
             if depth > MAX_META_DEPTH:
-                raise UserError(source, f"mappings and lists nested more than {MAX_META_DEPTH} deep", field="metadata")
+                raise UserError(source, f"mappings and lists nested more than {MAX_META_DEPTH} deep", field=field)
             within.extend((v, depth + 1) for v in (value.values() if isinstance(value, dict) else value))
     return meta
 

@@ -515,6 +515,53 @@ def test_a_wrong_meta_entry_is_one_line_naming_the_file_and_field(tmp_path: Path
     assert err.value.source.endswith("meta.json")
 
 
+def _written(tmp_path: Path) -> Path:
+    rec = tmp_path / "rec"
+    with RecordingWriter(rec, META_IN, {}) as w:
+        for i in range(3):
+            w.append(0.1 * i, (1.0 + 0.1 * i, 2.0, 0.0), np.zeros((4, 4), np.uint8), (1.0, 0.0), 10)
+        w.close()
+    return rec
+
+
+@pytest.mark.parametrize(
+    ("edit", "said"),
+    [
+        (lambda text: text[:-1] + ', "deep": ' + "[" * 5000 + "]" * 5000 + "}", "not JSON that can be read (maximum recursion depth"),
+        (lambda text: text[:-1] + ', "seed": 1' + "0" * 5000 + "}", "not JSON that can be read (an integer of thousands of digits)"),
+        (lambda text: text[:-1] + ', "format": "terrapref-recording/1"}', "names 'format' twice in one mapping"),
+    ],
+    ids=["nested-deep", "huge-integer", "key-twice"],
+)
+def test_a_meta_json_the_reader_cannot_take_is_one_line_naming_it(tmp_path: Path, edit, said: str):
+    rec = _written(tmp_path)
+    meta = rec / "meta.json"
+    meta.write_text(edit(meta.read_text().rstrip()))
+    with pytest.raises(UserError) as err:
+        read_recording(rec)
+    assert len(err.value.lines()) == 1 and err.value.source == str(meta) and said in err.value.lines()[0]
+
+
+def test_a_frame_line_of_a_huge_integer_or_nested_past_the_parser_is_a_malformed_line(tmp_path: Path):
+    rec = _written(tmp_path)
+    frames = rec / FRAMES
+    lines = frames.read_text().splitlines()
+    for bad in ('{"t": 1' + "0" * 5000 + "}", "[" * 5000 + "]" * 5000):
+        frames.write_text("\n".join([lines[0], bad, *lines[2:]]) + "\n")
+        with pytest.raises(UserError, match="line 2 is not a frame record"):
+            read_recording(rec)
+
+
+def test_a_class_id_image_past_pillows_pixel_limit_is_refused_before_it_is_decoded(tmp_path: Path, monkeypatch):
+    from PIL import Image
+
+    rec = _written(tmp_path)
+    read_recording(rec).image(0)
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 4)  # the 4 x 4 frames, past twice a limit of 4 pixels: a bomb
+    with pytest.raises(UserError, match="exceeds limit"):
+        read_recording(rec).image(0)
+
+
 def test_the_meta_module_examples_run():
     import doctest
 

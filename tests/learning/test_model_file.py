@@ -136,6 +136,28 @@ def test_dataset_without_format_in_meta_round_trips(tmp_path: Path):
     np.testing.assert_array_equal(back.U, data.U)
 
 
+@pytest.mark.parametrize(
+    ("edit", "field", "said"),
+    [
+        (lambda meta: meta | {"profile": ["lava", "mud"]}, "profile", "unknown or background class 'lava'"),
+        (lambda meta: meta | {"profile": [1, 2]}, "profile", "expected a list of class names"),
+        (
+            lambda meta: meta | {"features": {**meta["features"], "feature_classes": ["mud", "water", "rock", "mud"]}},
+            "features.feature_classes",
+            "names mud, water, rock, mud where its class table's feature classes are",
+        ),
+    ],
+    ids=["unknown-class", "not-names", "columns"],
+)
+def test_a_dataset_whose_order_or_columns_are_not_of_its_table_is_refused(tmp_path: Path, edit, field: str, said: str):
+    """Training such a dataset wrote a model that no command could read."""
+    data = random_dataset(10)
+    path = save_dataset(Dataset(data.U, data.labels, data.w, data.source, edit(dict(data.meta))), tmp_path / "d.safetensors")
+    with pytest.raises(UserError) as err:
+        load_dataset(path)
+    assert err.value.problems[0].field == field and said in err.value.lines()[0]
+
+
 def test_dataset_file_is_not_a_model(tmp_path: Path):
     path = save_dataset(random_dataset(10), tmp_path / "data.safetensors")
     err = _expect_user_error(path, FORMAT)

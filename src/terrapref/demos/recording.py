@@ -47,6 +47,7 @@ from terrapref.camera import SegmentationView, as_view
 from terrapref.errors import UserError, described, finite_number
 from terrapref.fileio import free_partial, keep_if_stopped, new_folder, release_folder, replace_dir, write_text_atomic
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth, read_depth_png, read_label_png, write_png_atomic
+from terrapref.tensorfile import parse_metadata
 from terrapref.vehicle.ground import LEVEL, Attitude
 from terrapref.yamlio import dump_yaml, load_yaml_text
 
@@ -562,11 +563,12 @@ def _read_meta(root: Path) -> dict:
     if not root.is_dir():
         raise UserError(str(root), "no such recording directory")
     try:
-        meta = json.loads(meta_path.read_text())
+        text = meta_path.read_text()
     except FileNotFoundError:
         raise UserError(str(meta_path), "missing; not a terrapref recording") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
         raise UserError(str(meta_path), f"not valid JSON ({exc})") from None
+    meta = parse_metadata(text, str(meta_path), field="")
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise UserError(str(meta_path), f"expected {FORMAT!r}", field="format")
     return meta
@@ -630,7 +632,7 @@ def _frame_record(line: str) -> dict | None:
     """One line parsed as a frame record with every key present, or None."""
     try:
         row = json.loads(line)
-    except json.JSONDecodeError:
+    except (ValueError, RecursionError):  # not JSON, an integer of thousands of digits, nested past the parser's reach
         return None
     return row if isinstance(row, dict) and all(k in row for k in ("t", "pose", "cmd", "label", "image")) else None
 

@@ -32,12 +32,13 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from terrapref.camera import CameraConfig
-from terrapref.errors import ConfigError, UserError, described
+from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import EpochMetrics
 from terrapref.records import from_plain, to_plain
-from terrapref.terrain import ClassTable, PreferenceProfile
+from terrapref.terrain import ClassTable
+from terrapref.terrain.profile import check_columns, declared_order
 
 FORMAT = "terrapref-model/1"
 CLASSIFIER = "classifier"  # the header's "kind" of C; baselines write their own kinds
@@ -201,34 +202,13 @@ def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, 
         features = FeatureConfig.from_dict(meta["features"])
         camera = CameraConfig.from_dict(meta["camera"])
         classes = ClassTable.from_dict(meta["classes"], source)
-        profile = None if meta["profile"] is None else _profile(meta["profile"], classes, source)
+        profile = None if meta["profile"] is None else declared_order(meta["profile"], classes, source)
     except KeyError as exc:
         raise UserError(source, "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError) as exc:
         raise UserError(source, f"invalid configuration: {exc}", field="metadata") from None
-    if tuple(features.feature_classes) != classes.feature_names:  # the terrain columns are the table's feature classes
-        raise UserError(
-            source,
-            f"names {', '.join(map(str, features.feature_classes))} where its class table's feature classes are "
-            + ", ".join(classes.feature_names),
-            field="features.feature_classes",
-        )
+    check_columns(features.feature_classes, classes, source)
     return features, camera, classes, profile
-
-
-def _profile(value: Any, classes: ClassTable, source: str) -> tuple[str, ...]:
-    """A file's declared preference order: each of its class table's terrain columns once, as
-    ``--profile`` is checked. Where the lethal column stands is left to the commands that score by
-    the order (files written before it had to come last read as written)."""
-    if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
-        raise UserError(source, f"expected a list of class names, most preferred first, got {described(value)}", field="profile")
-    lethal = classes.lethal_column
-    lethal_last = [n for n in value if n != lethal] + [n for n in value if n == lethal]
-    try:
-        PreferenceProfile.parse(lethal_last, classes, source=source)
-    except ConfigError as exc:
-        raise UserError(source, exc.problems[0].message, field="profile") from None
-    return tuple(value)
 
 
 def rule_blocks(meta: Mapping[str, Any], key: str, source: str) -> tuple[Block, ...] | None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from terrapref.errors import ConfigError
+from terrapref.errors import ConfigError, UserError, described
 from terrapref.terrain.classes import ClassTable, default_classes
 
 
@@ -60,3 +60,29 @@ class PreferenceProfile:
 
     def __str__(self) -> str:
         return ",".join(self.order)
+
+
+def declared_order(value: object, classes: ClassTable, source: str) -> tuple[str, ...]:
+    """A file's declared preference order (a model's or a dataset's ``profile``): each of its class
+    table's terrain columns once, as ``--profile`` is checked; a UserError naming ``source`` and
+    ``profile`` otherwise. Where the lethal column stands is left to the commands that score by the
+    order (files written before it had to come last read as written)."""
+    if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
+        raise UserError(source, f"expected a list of class names, most preferred first, got {described(value)}", field="profile")
+    lethal = classes.lethal_column
+    try:
+        PreferenceProfile.parse([n for n in value if n != lethal] + [n for n in value if n == lethal], classes, source=source)
+    except ConfigError as exc:
+        raise UserError(source, exc.problems[0].message, field="profile") from None
+    return tuple(value)
+
+
+def check_columns(columns: Sequence[str], classes: ClassTable, source: str) -> None:
+    """Refuse a file's terrain columns (its ``features.feature_classes``) that are not its class
+    table's feature classes, naming ``source`` and the field."""
+    if tuple(columns) != classes.feature_names:
+        raise UserError(
+            source,
+            f"names {', '.join(map(str, columns))} where its class table's feature classes are {', '.join(classes.feature_names)}",
+            field="features.feature_classes",
+        )
