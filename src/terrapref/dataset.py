@@ -463,7 +463,9 @@ def _rule_arrays(tensors: dict[str, np.ndarray], meta: dict, source: str) -> dic
     """The rules' arrays of a dataset file, each as ``meta["rules"]`` declares it: one row per
     sample, floats or uint8 class ids, and only the values its kind allows (:data:`ARRAY_KINDS`)."""
     declared = meta.get("rules", {})
-    if not isinstance(declared, dict) or not all(isinstance(d, dict) and isinstance(d.get("arrays"), dict) for d in declared.values()):
+    if not isinstance(declared, dict) or not all(
+        isinstance(d, dict) and isinstance(d.get("arrays"), dict) and isinstance(d.get("config"), dict) for d in declared.values()
+    ):
         raise UserError(source, "expected a mapping of rules, each with its config and arrays", field="rules")
     n = len(tensors["labels"])
     out: dict[str, dict[str, np.ndarray]] = {}

@@ -146,8 +146,9 @@ def test_dataset_without_format_in_meta_round_trips(tmp_path: Path):
             "features.feature_classes",
             "names mud, water, rock, mud where its class table's feature classes are",
         ),
+        (lambda meta: meta | {"rules": {"speed": {"config": "x", "arrays": {}}}}, "rules", "each with its config and arrays"),
     ],
-    ids=["unknown-class", "not-names", "columns"],
+    ids=["unknown-class", "not-names", "columns", "rule-config"],
 )
 def test_a_dataset_whose_order_or_columns_are_not_of_its_table_is_refused(tmp_path: Path, edit, field: str, said: str):
     """Training such a dataset wrote a model that no command could read."""
