@@ -502,6 +502,7 @@ def test_the_meta_reads_back_as_written_with_its_keys_in_the_files_order(demo_re
         ("sim", {"camera_rate_hz": 0}, "sim.camera_rate_hz", "expected a frame rate > 0 [Hz]"),
         ("sim", {"camera_rate_hz": 10.0, "vehicle": {"wheels": 4}}, "sim.vehicle", "invalid (TypeError"),
         ("origin_shift_m", [1.0], "origin_shift_m", "expected two finite numbers [m]"),
+        ("path", [[12.0, 12.0], [12.0, 12.0], [12.0, 12.0]], "path", "expected at least two distinct [x, y] points"),
     ],
 )
 def test_a_wrong_meta_entry_is_one_line_naming_the_file_and_field(tmp_path: Path, key, value, field, message):
@@ -560,6 +561,29 @@ def test_a_class_id_image_past_pillows_pixel_limit_is_refused_before_it_is_decod
     monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 4)  # the 4 x 4 frames, past twice a limit of 4 pixels: a bomb
     with pytest.raises(UserError, match="exceeds limit"):
         read_recording(rec).image(0)
+
+
+def test_a_summary_that_is_not_counts_is_refused_where_it_is_read(tmp_path: Path):
+    """``inspect`` and ``train`` say what a drive touched from its summary; "abc" seconds there
+    was an internal error."""
+    rec = _written(tmp_path)
+    meta = json.loads((rec / "meta.json").read_text())
+    meta["summary"] = {**meta.get("summary", {}), "collisions": 1, "contact_s": "abc"}
+    (rec / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(UserError) as err:
+        read_recording(rec).lethal_contact()
+    assert err.value.lines() == [f"{rec / 'meta.json'}: summary.contact_s: expected a number >= 0, got string 'abc'"]
+
+
+def test_inspect_reads_a_recording_without_its_preference_set_as_train_does(demo_recording: FullRecording, tmp_path: Path):
+    from terrapref.report.inspect import summarise
+
+    copy = tmp_path / "rec"
+    shutil.copytree(demo_recording.rec.path, copy)
+    meta = json.loads((copy / "meta.json").read_text())
+    del meta["preference_set"]
+    (copy / "meta.json").write_text(json.dumps(meta))
+    assert summarise(read_recording(copy)).frames == len(demo_recording.rec)  # the default control set, as train takes it
 
 
 def test_the_meta_module_examples_run():

@@ -454,4 +454,6 @@ def _path(value: Any, source: str, field: str, least: int) -> Points:
         raise UserError(
             source, "expected at least two finite [x, y] points" if least > 1 else "expected two finite numbers [m]", field=field
         )
+    if least > 1 and len(np.unique(points, axis=0)) < 2:  # a path the vehicle could follow
+        raise UserError(source, "expected at least two distinct [x, y] points", field=field)
     return _points(points)

@@ -338,6 +338,9 @@ class Recording:
         """What the drive's summary says of lethal terrain under the footprint ("2 entries, 3.4 s,
         2.9 m"), None when it touched none (or, recorded before contact was counted, entered none)."""
         run = self.meta.get("summary") if isinstance(self.meta.get("summary"), dict) else {}
+        for key in ("collisions", "contact_s", "contact_m"):
+            if run.get(key) is not None and not (finite_number(run[key]) and run[key] >= 0):
+                raise UserError(str(self.path / META), f"expected a number >= 0, got {described(run[key])}", field=f"summary.{key}")
         entries, seconds, metres = run.get("collisions") or 0, run.get("contact_s") or 0.0, run.get("contact_m")
         if not entries and not seconds:
             return None

@@ -92,7 +92,7 @@ def summarise(recording: Recording) -> RecordingSummary:
     scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes, driven=True)
     world = rasterise(scenario)
     profile = PreferenceProfile.parse(meta.get("profile") or list(classes.profile), classes, source=str(recording.path / "meta.json"))
-    control = ControlSet.from_dict(meta["preference_set"]["control"])
+    control = ControlSet.from_dict(meta["preference_set"]["control"]) if meta.get("preference_set") else ControlSet()  # as train reads it
     counts = np.bincount(recording.labels, minlength=control.m)[: control.m]
     zones = [(z, z.reached) for z in score_zones(recording.poses, scenario, world, profile)]
     run = meta.get("summary") if isinstance(meta.get("summary"), dict) else {}
