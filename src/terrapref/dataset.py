@@ -455,6 +455,9 @@ def load_dataset(path: str | Path) -> Dataset:
     check_columns(features.feature_classes, classes, str(path))
     if meta.get("profile") is not None:  # None: the drives declared none
         declared_order(meta["profile"], classes, str(path))
+    drives = meta.get("recordings")
+    if drives is not None and not (isinstance(drives, list) and all(isinstance(d, dict) for d in drives)):
+        raise UserError(str(path), "expected a list of the recordings it was made from, each a mapping", field="recordings")
     rules = _rule_arrays(tensors, meta, str(path))
     return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, rules)
 

@@ -147,8 +147,9 @@ def test_dataset_without_format_in_meta_round_trips(tmp_path: Path):
             "names mud, water, rock, mud where its class table's feature classes are",
         ),
         (lambda meta: meta | {"rules": {"speed": {"config": "x", "arrays": {}}}}, "rules", "each with its config and arrays"),
+        (lambda meta: meta | {"recordings": ["x"]}, "recordings", "expected a list of the recordings it was made from"),
     ],
-    ids=["unknown-class", "not-names", "columns", "rule-config"],
+    ids=["unknown-class", "not-names", "columns", "rule-config", "recordings"],
 )
 def test_a_dataset_whose_order_or_columns_are_not_of_its_table_is_refused(tmp_path: Path, edit, field: str, said: str):
     """Training such a dataset wrote a model that no command could read."""
