@@ -319,3 +319,20 @@ def test_training_without_the_identifiability_report_trains_the_same_weights():
     # a second stage needs the fit: it is made whatever identify says
     staged = train(ds, train_config(epochs=3), identify=False, rules=[SecondStageConfig()])
     assert staged.rules[0].type == "second_stage" and staged.identifiability is not None
+
+
+def test_a_rules_configuration_edited_in_a_dataset_is_refused_naming_the_field_not_failing_in_a_fit():
+    from terrapref.errors import UserError
+    from terrapref.learning.train import DATASET, FitData
+    from terrapref.rules.second.rule import LookaheadConfig
+
+    data = random_dataset(10)
+    for lookahead, read in (({"after_s": 2.4, "stride": 2}, True), ({"after_s": 2.4, "stride": 0}, False), ("x", False)):
+        meta = dict(data.meta) | {"rules": {"second_stage": {"config": {"lookahead": lookahead}, "arrays": {}}}}
+        fit = FitData(Dataset(data.U, data.labels, data.w, data.source, meta, {"second_stage": {}}), mirror=False)
+        if read:
+            assert fit.rule_config("second_stage", lambda c: LookaheadConfig.from_dict(c["lookahead"]))[0].stride == 2
+            continue
+        with pytest.raises(UserError) as err:
+            fit.rule_config("second_stage", lambda c: LookaheadConfig.from_dict(c["lookahead"]))
+        assert err.value.source == DATASET and err.value.problems[0].field == "rules.second_stage.config"

@@ -22,6 +22,7 @@ if TYPE_CHECKING:  # for the hints only: the command line imports what a command
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from terrapref.learning.pipeline import RunOptions, interrupted_path, train_and_save
+    from terrapref.learning.train import DATASET
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named, rules_with
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
@@ -63,6 +64,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
             recipe=recipe.name,
             options=RunOptions(progress=_epoch_printer(config, args.verbose)),
         )
+    except UserError as exc:  # a rule's configuration in a dataset file: named by the file it came from
+        raise UserError(str(args.data[0]), exc.problems) if exc.source == DATASET else exc from None
     except KeyboardInterrupt:
         if interrupted_path(args.out).exists():
             print(

@@ -19,6 +19,7 @@ import numpy as np
 
 from terrapref.configargs import option
 from terrapref.dataset import Dataset
+from terrapref.errors import UserError
 from terrapref.learning import exact
 from terrapref.learning import layers_compiled as kernels
 from terrapref.learning.identify import Comparisons, FittedLookahead, Identifiability, TableNames, count_comparisons, identifiability
@@ -244,6 +245,9 @@ def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tupl
 EpochHook = Callable[[int, ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None]  # (member, classifier, weights, metrics)
 
 
+DATASET = "the dataset"  # the source a UserError of the samples' own content names (train names the file instead)
+
+
 class FitData:
     """What the decision rules are fitted to: the samples C was trained on (labels steadied when
     asked), whether mirrored copies join them, and the linear utility over them, fitted once
@@ -263,6 +267,17 @@ class FitData:
     def rule_data(self, rule: str) -> tuple[dict[str, Any], dict[str, np.ndarray]] | None:
         """The configuration ``rule``'s arrays were read with, and the arrays (:meth:`Dataset.rule_data`)."""
         return self.dataset.rule_data(rule)
+
+    def rule_config(self, rule: str, read: Callable[[dict[str, Any]], Any]) -> tuple[Any, dict[str, np.ndarray]] | None:
+        """:meth:`rule_data` with the configuration as ``read`` reads it; what ``read`` cannot
+        read (a dataset edited by hand) is a UserError naming the field, not an error inside a fit."""
+        found = self.rule_data(rule)
+        if found is None:
+            return None
+        try:
+            return read(found[0]), found[1]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(DATASET, f"unreadable ({type(exc).__name__}: {exc})", field=f"rules.{rule}.config") from None
 
     @property
     def has_utility(self) -> bool:

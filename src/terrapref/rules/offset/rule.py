@@ -206,11 +206,10 @@ class OffsetConfig(RuleConfig):
 
     def fit(self, data: FitData) -> OffsetRule | None:
         """The offset utility fitted to the offsets the driver steered for; None for data without the rule's arrays."""
-        found = data.rule_data(self.type)
+        found = data.rule_config(self.type, lambda recorded: OffsetGeometry.from_dict(recorded["geometry"]))
         if found is None:
             return None
-        recorded, arrays = found
-        geometry = OffsetGeometry.from_dict(recorded["geometry"])  # the geometry the frames were read with
+        geometry, arrays = found  # the geometry the frames were read with
         relief = arrays.get("relief_m")
         if relief is not None and relief.shape[2] != 2 * len(RELIEF_BANDS_DEG):
             raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")

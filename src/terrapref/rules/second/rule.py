@@ -110,8 +110,8 @@ class SecondStageConfig(RuleConfig):
     def fit(self, data: FitData) -> SecondStageRule:
         """The linear utility over the samples C was trained on (through the look-ahead when they carry it)."""
         utility, _ = data.linear_utility()
-        found = data.rule_data(self.type)
-        look = LookaheadConfig.from_dict(found[0]["lookahead"]) if found is not None else None
+        found = data.rule_config(self.type, lambda recorded: LookaheadConfig.from_dict(recorded["lookahead"]))
+        look = found[0] if found is not None else None
         config = replace(self, after_s=look.after_s, stride=look.stride) if look is not None else self
         return SecondStageRule(config, utility, "lookahead" if look is not None else "frames")
 

@@ -132,11 +132,10 @@ class SpeedConfig(RuleConfig):
 
     def fit(self, data: FitData) -> SpeedRule | None:
         """The speed model fitted to the speeds the driver drove; None without the rule's arrays or a steady speed."""
-        found = data.rule_data(self.type)
+        found = data.rule_config(self.type, lambda recorded: replace(self, half_width_m=float(recorded["half_width_m"])))
         if found is None:
             return None
-        recorded, arrays = found
-        config = replace(self, half_width_m=float(recorded["half_width_m"]))
+        config, arrays = found
         features = data.dataset.feature_config
         table = ClassTable.from_dict(data.dataset.meta["classes"])
         lethal = (features.feature_classes.index(table.lethal_column),) if table.lethal_column in features.feature_classes else ()
