@@ -452,6 +452,10 @@ class Recording:
 
 
 MAX_POSE = 1e7  # a frame's pose: x and y [m] and heading [rad] within this of 0 (UTM coordinates fit)
+# The largest command a frame may record, either way: a speed [m/s] past what an import takes from a
+# log of a robot file's fastest robot (30 m/s, commands to 1.5 times it and 0.5), and a yaw rate
+# [rad/s] no wheel turns at (a log's, in whatever units, comes nowhere near it).
+MAX_CMD = (50.0, 1e6)
 
 
 def _frame_problem(row: dict) -> tuple[str, str] | None:
@@ -465,6 +469,8 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
             return key, f"expected {size} finite numbers"
     if not all(abs(x) <= MAX_POSE for x in row["pose"]):
         return "pose", f"expected x and y [m] and a heading [rad] within +-{MAX_POSE:g} (a place on Earth), got {row['pose']}"
+    if not (abs(row["cmd"][0]) <= MAX_CMD[0] and abs(row["cmd"][1]) <= MAX_CMD[1]):
+        return "cmd", f"expected a speed within +-{MAX_CMD[0]:g} m/s and a yaw rate within +-{MAX_CMD[1]:g} rad/s, got {row['cmd']}"
     if isinstance(row["label"], bool) or not isinstance(row["label"], int) or row["label"] < 0:
         return "label", "expected an integer >= 0"
     image = row["image"]
@@ -476,6 +482,8 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
     attitude = row.get("attitude")
     if attitude is not None and not (isinstance(attitude, list) and len(attitude) == 3 and all(finite_number(x) for x in attitude)):
         return "attitude", "expected 3 finite numbers: z [m], pitch and roll [rad]"
+    if attitude is not None and abs(attitude[0]) > MAX_POSE:
+        return "attitude", f"expected a height z within +-{MAX_POSE:g} m, got {attitude[0]:g}"
     if attitude is not None and not all(abs(a) < 0.5 * math.pi for a in attitude[1:]):
         return "attitude", f"pitch {attitude[1]:g} and roll {attitude[2]:g} rad: expected each within +-pi/2 (a body on its wheels)"
     if (depth is None) != (attitude is None):
