@@ -138,8 +138,7 @@ def rules_of(model: LoadedModel) -> tuple[tuple[Rule, ...], str | None]:
     raw = model.meta.get("features")
     read = read_rules(blocks, model.features, raw if isinstance(raw, Mapping) else {}, model.path, key)
     _check_sets_speed(read, model.header.sets_speed, model.path)
-    table = model.classes
-    lethal = {model.features.feature_classes.index(table.lethal_column)} if table.lethal else set()
+    lethal = set(model.classes.lethal_columns(model.features.feature_classes))
     for i, rule in enumerate(read):
         if isinstance(rule, SpeedRule) and not set(rule.model.lethal) <= lethal:  # a file older than lethal columns lists none
             named = ", ".join(str(c) for c in sorted(set(rule.model.lethal) - lethal))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -129,6 +130,11 @@ class ClassTable:
         """The name of the one terrain column all lethal classes share: the class's own name when
         the table has one lethal class, ``lethal`` when it has several, None when it has none."""
         return _lethal_column(self.lethal)
+
+    def lethal_columns(self, columns: Sequence[str]) -> tuple[int, ...]:
+        """Where the lethal column stands among terrain ``columns`` (a file's feature classes): its
+        index, or none when the table has no lethal class (or the columns do not name it)."""
+        return (list(columns).index(self.lethal_column),) if self.lethal_column in columns else ()
 
     @property
     def feature_names(self) -> tuple[str, ...]:

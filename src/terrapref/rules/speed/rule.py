@@ -138,7 +138,7 @@ class SpeedConfig(RuleConfig):
         config, arrays = found
         features = data.dataset.feature_config
         table = ClassTable.from_dict(data.dataset.meta["classes"])
-        lethal = (features.feature_classes.index(table.lethal_column),) if table.lethal_column in features.feature_classes else ()
+        lethal = table.lethal_columns(features.feature_classes)
         frame = arrays["frame"].astype(np.int64)
         grade, rough = (arrays.get(name) for name in ("grade", "rough"))  # absent from datasets featurised before they were read: flat
         grade, rough = (None if a is None or not np.isfinite(a).any() else a for a in (grade, rough))  # a drive on flat ground
