@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.scenario.builder import CourseBuilder, trail
-from terrapref.scenario.teaching import relief_course
+from terrapref.scenario.teaching import STRIP_TAPER_M, place_strip, relief_course
 from terrapref.terrain import default_classes
 
 OUT = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "scenarios"
@@ -107,7 +107,7 @@ def test_course() -> Course:
 
 # teach_course: the order of its situations. Every pair of the three non-lethal feature classes
 # meets on the path, each class once on the left and once on the right. Each of them also lies on
-# the path as a 2.8 m strip with non_traversable on one side and another class on the other
+# the path as a strip (2.4-3.2 m wide, tapered) with non_traversable on one side and another class on the other
 # (once with the trees on the left, once on the right): the driver stays on the strip or moves
 # over, which shows how much worse one class is than another against a 2 m detour, and puts
 # non_traversable beside every class. Every class lies alone on the path twice, once a little
@@ -160,15 +160,16 @@ def teach_course(
     half: dict[str, float] | None = None,
     s_start: float = 8.0,
     name: str = "teach_course",
-    middle_m: float = 2.8,
+    taper_m: float = STRIP_TAPER_M,
 ) -> Course:
     """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round,
     every class alone, and every class in a lane it must be driven along (its speed on it).
 
     Situations sit on straight legs (``2 * half[kind]`` m); the trail bends between them. Lone
     patches are at most 3 m across (passed on grass); pair patches are 7-8 m long and 5-5.5 m
-    wide and meet on the path, as on train_course; a triple puts a 2.8 m wide strip on the path
-    between two wide patches (7 m long), so that keeping to the path has a price in terrain; a
+    wide and meet on the path, as on train_course; a triple puts a strip on the path, 7 m long and
+    2.4-3.2 m wide (its edge beside the other class tapered: terrapref.scenario.teaching.STRIP_TAPER_M),
+    between two wide patches, so that keeping to the path has a price in terrain; a
     lane puts a class :data:`LANE_WIDTH_M` wide and :data:`LANE_M` long on the path between walls no driver passes round.
     """
     zones = zones or TEACH_ZONES
@@ -193,7 +194,7 @@ def teach_course(
         "non_traversable": lambda s, lat: c.rect("non_traversable", s, lat, 2.8, 2.6),
     }
     pair_sizes = [(8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5)]
-    s, pairs = s_start, 0
+    s, pairs, strips = s_start, 0, 0
     for k, zone in enumerate(zones):
         kind = _kind(zone)
         s += half[kind]
@@ -211,9 +212,8 @@ def teach_course(
             c.pair(str(k + 1), zone[0], zone[1], s, (length, width))
         else:
             left, middle, right = zone
-            c.rect(left, s, middle_m / 2 + 2.25, 7.0, 4.5)
-            c.rect(middle, s, 0.0, 7.0, middle_m)
-            c.rect(right, s, -middle_m / 2 - 2.25, 7.0, 4.5)
+            place_strip(c, zone, s, (1, -1)[strips % 2] * taper_m, ("non_traversable",))
+            strips += 1
             c.zone(str(k + 1), f"{left} | {middle} | {right}", s, (11.0, 17.0), "best")
         s += half[kind]
     return c

@@ -6,13 +6,16 @@ from __future__ import annotations
 
 import itertools
 from collections import Counter
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from terrapref.evaluation.runner import EXPERT, RunSpec, run_one
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
 
+ROOT = Path(__file__).resolve().parents[2]
 CLASSES = default_classes().feature_names
 LETHAL = "non_traversable"
 
@@ -91,3 +94,49 @@ def test_the_synthetic_driver_shows_it_in_at_most_five_and_a_half_minutes(order)
     for left, middle, right in _triples(list(zones)):  # never the trees; the strip or the class beside it
         assert zones[f"{left} | {middle} | {right}"].choice in (middle, right if left == LETHAL else left)
     assert all(z.choice == "avoid" for z in m.zones if z.expect == "avoid")
+
+
+def _strip_metres(scenario, zone, lateral_m: float) -> tuple[float, float]:
+    """Metres of a strip zone's middle class, and of the class beside it that is not lethal, along
+    the strip's 7 m on the line ``lateral_m`` left of the path (the zone's rectangle sits on the
+    path, turned to its heading)."""
+    from terrapref.world.raster import rasterise
+
+    world = rasterise(scenario)
+    left, middle, right = zone.label.split(" | ")
+    side = 1.0 if right in scenario.classes.lethal else -1.0  # the neighbour's side
+    rect, along = zone.shape, np.arange(-3.45, 3.5, 0.05)
+    c, s = np.cos(rect.yaw_rad), np.sin(rect.yaw_rad)
+    lat = side * lateral_m
+    xy = np.stack([rect.center[0] + c * along - s * lat, rect.center[1] + s * along + c * lat], axis=1)
+    ids = world.class_at(xy)
+    neighbour = left if side > 0 else right
+    return 0.05 * float((ids == scenario.classes.id_of(middle)).sum()), 0.05 * float((ids == scenario.classes.id_of(neighbour)).sum())
+
+
+@pytest.mark.parametrize("table", [None, "examples/classes/rellis3d.yaml"])
+def test_a_strips_edge_beside_a_class_tapers_so_that_the_metres_on_it_change_steadily_with_the_offset(table):
+    """Across the offsets at which a footprint point passes the strip's edge beside the better
+    class, the metres it crosses on the strip shrink steadily (with straight edges they fell from
+    7 m to none within one 0.2 m step of the offsets, so a held offset only bounded the price step)."""
+    from terrapref.scenario.loader import parse_scenario
+    from terrapref.scenario.teaching import designed_course
+    from terrapref.terrain import load_classes
+
+    if table is None:
+        scenario = resolve_scenario("teach_course")
+    else:
+        classes = load_classes(ROOT / table)
+        scenario = parse_scenario(designed_course(classes, "full")[0].data(), table, classes)
+    strips = [z for z in scenario.zones if z.label.count(" | ") == 2 and z.expect == "best" and not _lane_label(z.label, scenario)]
+    assert len(strips) >= 6
+    for zone in strips:
+        metres = [_strip_metres(scenario, zone, y) for y in (1.1, 1.3, 1.5, 1.7)]
+        on_strip = [m for m, _ in metres]
+        assert all(a - b > 1.0 for a, b in zip(on_strip, on_strip[1:])), (zone.label, metres)
+        assert all(abs(m + n - 6.95) < 0.2 for m, n in metres), (zone.label, metres)  # the rest is the neighbour's
+
+
+def _lane_label(label: str, scenario) -> bool:
+    left, _, right = label.split(" | ")
+    return left == right and left in scenario.classes.lethal

@@ -143,7 +143,18 @@ RELIEF_DEG = {
 }
 START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last [m]
 PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
-STRIP_M = 2.8  # width of a strip on the path [m]
+STRIP_M, STRIP_LENGTH_M = 2.8, 7.0  # a strip on the path: its mean width and its length [m]
+# A strip's edge beside a feature class runs this much nearer the path at one end and as much
+# further at the other, so that its width goes 2.4-3.2 m along it, as a generated layout's middle
+# patches' do [m]. With straight edges, the metres a footprint point crosses on the strip change all
+# at once where the point passes an edge, so the offset a driver holds only bounds how much worse
+# the strip's class is than its neighbour's, and where the edges fall among the offsets (0.2 m
+# apart) set the fitted step between the two by up to half again the driver's. Tapered, the metres
+# change steadily with the offset, and the offset it holds tells where its trade balances.
+STRIP_TAPER_M = 0.4
+# ... and on a course with relief: straight edges, as its drives were measured (its terrain
+# situations' trade against relief has not been measured with tapered strips) [m].
+RELIEF_TAPER_M = 0.0
 LONE_OFFSET_M = 0.3  # a lone patch lies this far left or right of the path [m]
 # The ladder's best class alone, (length, width) [m]: wider than the teaching course's lone patch
 # (3.0 by 2.6 m, gone round by a driver pricing the class above about 6.8 on the detour's scale),
@@ -503,15 +514,19 @@ def _turns(count: int) -> list[float]:
     return turns[: count - 1]
 
 
-def build_course(classes: ClassTable, items: Sequence[Situation], name: str, description: str) -> CourseBuilder:
-    """The course of ``items`` in driving order, on a trail folded into a compact map."""
+def build_course(
+    classes: ClassTable, items: Sequence[Situation], name: str, description: str, taper_m: float = STRIP_TAPER_M
+) -> CourseBuilder:
+    """The course of ``items`` in driving order, on a trail folded into a compact map; its strips'
+    edges beside a class tapered by ``taper_m`` (:func:`place_strip`), the first strip's
+    narrower at its start and the next one's wider, in turn."""
     lengths = [s.length_m for s in items]
     legs = [START_M + lengths[0], *lengths[1:]]
     legs[-1] += END_M
     wp, size = trail(legs, _turns(len(items)))
     c = CourseBuilder(name, description, size, [tuple(p) for p in wp], classes.background, classes)
     order = {n: k for k, n in enumerate(classes.names)}
-    s, pairs = START_M, 0
+    s, pairs, strips = START_M, 0, 0
     for k, item in enumerate(items):
         s += item.before_m
         zid = str(k + 1)
@@ -531,14 +546,31 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
             c.pair(zid, item.classes[0], item.classes[1], s, PAIR_SIZES[pairs % len(PAIR_SIZES)])
             pairs += 1
         else:
-            left, middle, right = item.classes
-            c.rect(left, s, STRIP_M / 2 + 2.25, 7.0, 4.5)
-            c.rect(middle, s, 0.0, 7.0, STRIP_M)
-            c.rect(right, s, -STRIP_M / 2 - 2.25, 7.0, 4.5)
+            place_strip(c, item.classes, s, (1, -1)[strips % 2] * taper_m, classes.lethal)
+            strips += 1
             # Beside the background, leaving the strip for it is every driver's choice.
             c.zone(zid, item.label, s, (11.0, 17.0), "avoid" if classes.background in item.classes else "best")
         s += item.after_m
     return c
+
+
+def place_strip(c: CourseBuilder, classes: Sequence[str], s: float, taper_m: float, walls: Sequence[str] = ()) -> None:
+    """A strip (left, middle, right ``classes``) centred at arc length ``s`` of ``c``'s path: the
+    middle class :data:`STRIP_M` wide on average and :data:`STRIP_LENGTH_M` long on the path, 4.5 m
+    of the others beside it. Each edge beside a class not among ``walls`` (lethal classes) runs
+    ``taper_m`` nearer the path at the strip's start and as much further at its end (a negative
+    ``taper_m``: the other way round; :data:`STRIP_TAPER_M`)."""
+    left, middle, right = classes
+    a, h = STRIP_LENGTH_M / 2, STRIP_M / 2
+    if taper_m == 0.0:  # straight edges: rectangles, as courses were written before the taper
+        for name, lat, width in ((left, h + 2.25, 4.5), (middle, 0.0, STRIP_M), (right, -h - 2.25, 4.5)):
+            c.rect(name, s, lat, STRIP_LENGTH_M, width)
+        return
+    tl, tr = (0.0 if name in walls else taper_m for name in (left, right))
+    edge_l, edge_r = [(-a, h - tl), (a, h + tl)], [(-a, -h + tr), (a, -h - tr)]
+    c.polygon(left, s, [*edge_l, (a, h + 4.5), (-a, h + 4.5)])
+    c.polygon(middle, s, [*edge_r, *reversed(edge_l)])
+    c.polygon(right, s, [(-a, -h - 4.5), (a, -h - 4.5), *reversed(edge_r)])
 
 
 def _lane(c: CourseBuilder, classes: tuple[str, ...], s: float) -> None:
@@ -586,7 +618,7 @@ def designed_course(
     full = fits(classes, relief) if design == "auto" else design == "full"
     items = situations(classes, full, relief)
     text = description(classes, full, relief) + (f" {RELIEF_DESCRIPTION}" if relief else "")
-    return build_course(classes, items, name, text), items
+    return build_course(classes, items, name, text, RELIEF_TAPER_M if relief else STRIP_TAPER_M), items
 
 
 def relief_course(
