@@ -114,7 +114,7 @@ def _strip_metres(scenario, zone, lateral_m: float) -> tuple[float, float]:
     return 0.05 * float((ids == scenario.classes.id_of(middle)).sum()), 0.05 * float((ids == scenario.classes.id_of(neighbour)).sum())
 
 
-@pytest.mark.parametrize("table", [None, "examples/classes/rellis3d.yaml"])
+@pytest.mark.parametrize("table", [None, "examples/classes/small.yaml"])  # a table of one's own: its strip beside the background
 def test_a_strips_edge_beside_a_class_tapers_so_that_the_metres_on_it_change_steadily_with_the_offset(table):
     """Across the offsets at which a footprint point passes the strip's edge beside the better
     class, the metres it crosses on the strip shrink steadily (with straight edges they fell from
@@ -128,8 +128,8 @@ def test_a_strips_edge_beside_a_class_tapers_so_that_the_metres_on_it_change_ste
     else:
         classes = load_classes(ROOT / table)
         scenario = parse_scenario(designed_course(classes, "full")[0].data(), table, classes)
-    strips = [z for z in scenario.zones if z.label.count(" | ") == 2 and z.expect == "best" and not _lane_label(z.label, scenario)]
-    assert len(strips) >= 6
+    strips = [z for z in scenario.zones if z.label.count(" | ") == 2 and not _lane_label(z.label, scenario)]
+    assert len(strips) == (6 if table is None else 2)
     for zone in strips:
         metres = [_strip_metres(scenario, zone, y) for y in (1.1, 1.3, 1.5, 1.7)]
         on_strip = [m for m, _ in metres]
