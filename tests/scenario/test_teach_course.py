@@ -96,13 +96,10 @@ def test_the_synthetic_driver_shows_it_in_at_most_five_and_a_half_minutes(order)
     assert all(z.choice == "avoid" for z in m.zones if z.expect == "avoid")
 
 
-def _strip_metres(scenario, zone, lateral_m: float) -> tuple[float, float]:
+def _strip_metres(scenario, world, zone, lateral_m: float) -> tuple[float, float]:
     """Metres of a strip zone's middle class, and of the class beside it that is not lethal, along
     the strip's 7 m on the line ``lateral_m`` left of the path (the zone's rectangle sits on the
-    path, turned to its heading)."""
-    from terrapref.world.raster import rasterise
-
-    world = rasterise(scenario)
+    path, turned to its heading), read from ``world``, the scenario rasterised."""
     left, middle, right = zone.label.split(" | ")
     side = 1.0 if right in scenario.classes.lethal else -1.0  # the neighbour's side
     rect, along = zone.shape, np.arange(-3.45, 3.5, 0.05)
@@ -122,6 +119,7 @@ def test_a_strips_edge_beside_a_class_tapers_so_that_the_metres_on_it_change_ste
     from terrapref.scenario.loader import parse_scenario
     from terrapref.scenario.teaching import designed_course
     from terrapref.terrain import load_classes
+    from terrapref.world.raster import rasterise
 
     if table is None:
         scenario = resolve_scenario("teach_course")
@@ -130,8 +128,9 @@ def test_a_strips_edge_beside_a_class_tapers_so_that_the_metres_on_it_change_ste
         scenario = parse_scenario(designed_course(classes, "full")[0].data(), table, classes)
     strips = [z for z in scenario.zones if z.label.count(" | ") == 2 and not _lane_label(z.label, scenario)]
     assert len(strips) == (6 if table is None else 2)
+    world = rasterise(scenario)
     for zone in strips:
-        metres = [_strip_metres(scenario, zone, y) for y in (1.1, 1.3, 1.5, 1.7)]
+        metres = [_strip_metres(scenario, world, zone, y) for y in (1.1, 1.3, 1.5, 1.7)]
         on_strip = [m for m, _ in metres]
         assert all(a - b > 1.0 for a, b in zip(on_strip, on_strip[1:])), (zone.label, metres)
         assert all(abs(m + n - 6.95) < 0.2 for m, n in metres), (zone.label, metres)  # the rest is the neighbour's
