@@ -1,14 +1,14 @@
 """The offset rule's class prices fitted with each situation of the drives left out in turn.
 
-Reads a dataset `terrapref featurize` wrote and the recordings it was made from, in the same
-order. Each frame belongs to the scored situation (zone) of its recording's course whose middle
+Reads a dataset `terrapref featurize` wrote and the recordings it was made from (by default
+where the dataset says they were; else given in the order they were featurised). Each frame belongs to the scored situation (zone) of its recording's course whose middle
 lies from 8 m behind to 12 m ahead of the vehicle along the path, the nearest to 2 m ahead. The
 offset utility is fitted as `train` fits it, once on every frame and once without each
 situation's frames, and the class prices are printed on the detour's scale, in the order the
-drives declared, lethal classes left out (or ``--order``), with the steps between them: which situations hold a step up
-and which hold it down (docs/lab/2026-12-07-the-strip-the-driver-keeps.md).
+drives declared, lethal classes left out (or ``--order``), with the steps between them: which
+situations hold a step up and which hold it down (docs/lab/2026-12-07-the-strip-the-driver-keeps.md).
 
-    python scripts/fit_by_situation.py D.safetensors REC [REC ...] [--order mud,rock,water]
+    python scripts/fit_by_situation.py D.safetensors [REC ...] [--order mud,rock,water]
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy as np
 
 from terrapref.dataset import load_dataset, on_map
 from terrapref.demos.recording import read_recording
+from terrapref.errors import UserError
 from terrapref.rules.offset.features import RELIEF_BANDS_DEG
 from terrapref.rules.offset.fit import fit_offset_utility
 from terrapref.rules.offset.geometry import OffsetGeometry
@@ -54,12 +55,21 @@ def prices(arrays: dict, offsets: np.ndarray, keep: np.ndarray, columns: list[in
 
 
 def main() -> None:
+    try:
+        run()
+    except (UserError, OSError, ValueError) as exc:  # a file that is not what it should be: one line
+        raise SystemExit(f"fit_by_situation: {exc}") from None
+
+
+def run() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("dataset", help="the dataset terrapref featurize wrote of the recordings")
-    parser.add_argument("recordings", nargs="+", help="the recordings, in the order they were featurised")
+    parser.add_argument("recordings", nargs="*", help="the recordings, in the order they were featurised (default: where the dataset says)")
     parser.add_argument("--order", help="the classes to print, comma-separated (default: the drives' declared order)")
     args = parser.parse_args()
     data = load_dataset(args.dataset)
+    if data.rule_data("offset") is None:
+        raise SystemExit(f"{args.dataset}: holds no offset rule's arrays (featurised for another recipe)")
     config, arrays = data.rule_data("offset")
     offsets = OffsetGeometry.from_dict(config["geometry"]).offsets
     names = data.meta["features"]["feature_classes"]
@@ -68,10 +78,11 @@ def main() -> None:
     if unknown := [c for c in order if c not in names]:
         raise SystemExit(f"--order: {', '.join(unknown)} not among the dataset's terrain columns ({', '.join(names)})")
     columns = [names.index(c) for c in order]
-    if len(args.recordings) != len(np.unique(data.source)):
-        raise SystemExit(f"{args.dataset}: made of {len(np.unique(data.source))} recording(s), {len(args.recordings)} given")
+    recordings = args.recordings or [entry["path"] for entry in data.meta["recordings"]]
+    if len(recordings) != len(data.meta["recordings"]):
+        raise SystemExit(f"{args.dataset}: made of {len(data.meta['recordings'])} recording(s), {len(recordings)} given")
     which, labels = np.full(len(data), -1), []
-    for k, folder in enumerate(args.recordings):
+    for k, folder in enumerate(recordings):
         mine, theirs = situations(folder)
         if (data.source == k).sum() != len(mine):
             raise SystemExit(f"{args.dataset}: recording {k} has {(data.source == k).sum()} frames, {folder} {len(mine)}")
