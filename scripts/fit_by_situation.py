@@ -74,7 +74,7 @@ def run() -> None:
     offsets = OffsetGeometry.from_dict(config["geometry"]).offsets
     names = data.meta["features"]["feature_classes"]
     lethal = {*data.meta["classes"]["lethal"], "lethal"}  # the lethal classes, and the column they share
-    order = args.order.split(",") if args.order else [c for c in data.meta["profile"] if c in names and c not in lethal]
+    order = args.order.split(",") if args.order else [c for c in data.meta.get("profile") or names if c in names and c not in lethal]
     if unknown := [c for c in order if c not in names]:
         raise SystemExit(f"--order: {', '.join(unknown)} not among the dataset's terrain columns ({', '.join(names)})")
     columns = [names.index(c) for c in order]
