@@ -20,6 +20,7 @@ import numpy as np
 from terrapref.dataset import load_dataset, on_map
 from terrapref.demos.recording import read_recording
 from terrapref.errors import UserError
+from terrapref.evaluation.speed import zone_spans
 from terrapref.rules.offset.features import RELIEF_BANDS_DEG
 from terrapref.rules.offset.fit import fit_offset_utility
 from terrapref.rules.offset.geometry import OffsetGeometry
@@ -30,21 +31,19 @@ BEHIND_M, AHEAD_M, AIM_M = 8.0, 12.0, 2.0  # a frame's situation: its middle thi
 
 
 def situations(folder: str) -> tuple[np.ndarray, list[str]]:
-    """Each kept frame's situation in the recording ``folder`` (an index into the labels; -1: none) and the labels."""
+    """Each kept frame's situation in the recording ``folder`` (an index into the labels; -1: none) and
+    the labels: the zones the path crosses, each at the middle of its stretch of the path."""
     rec = read_recording(folder)
     scenario = parse_scenario(rec.scenario, f"{folder}/scenario.yaml", rec.classes, driven=True)
     poses = rec.poses[on_map(rec.poses, scenario)]
     path = ReferencePath(scenario.waypoints)
     tracker = PathTracker(path, back_m=2.0, ahead_m=6.0)
     progress = np.array([tracker.update(p[:2]) for p in poses])
-    middles = []
-    for zone in scenario.zones:
-        x0, y0, x1, y1 = zone.shape.bounds()
-        middles.append(path.project(np.array([(x0 + x1) / 2, (y0 + y1) / 2]))[0])
-    ahead = np.array(middles)[None, :] - progress[:, None]
+    spans = zone_spans(scenario)
+    ahead = np.array([(first + last) / 2 for _, first, last in spans])[None, :] - progress[:, None]
     near = (ahead > -BEHIND_M) & (ahead < AHEAD_M)
     which = np.argmin(np.where(near, np.abs(ahead - AIM_M), np.inf), axis=1)
-    return np.where(near.any(axis=1), which, -1), [zone.label or zone.id for zone in scenario.zones]
+    return np.where(near.any(axis=1), which, -1), [name for name, _, _ in spans]
 
 
 def prices(arrays: dict, offsets: np.ndarray, keep: np.ndarray, columns: list[int]) -> np.ndarray:
