@@ -19,12 +19,18 @@ def _parsed(path: Path) -> ast.Module:
     return ast.parse(path.read_text(), str(path))
 
 
+@functools.cache
+def _walked(tree: ast.AST) -> tuple[ast.AST, ...]:
+    """Every node of ``tree`` (``ast.walk``'s order), listed once for all of this file's checks."""
+    return tuple(ast.walk(tree))
+
+
 def _package_imports() -> dict[str, set[str]]:
     """Top-level part (package or module) -> the other top-level parts it imports anywhere."""
     edges: dict[str, set[str]] = {}
     for path in ROOT.rglob("*.py"):
         part = path.relative_to(ROOT).parts[0].removesuffix(".py")
-        for node in ast.walk(_parsed(path)):
+        for node in _walked(_parsed(path)):
             names = (
                 [a.name for a in node.names]
                 if isinstance(node, ast.Import)
@@ -47,7 +53,7 @@ def _module_imports() -> dict[str, set[str]]:
         modules[name] = path
     edges: dict[str, set[str]] = {}
     for name, path in modules.items():
-        for node in ast.walk(_parsed(path)):
+        for node in _walked(_parsed(path)):
             if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("terrapref"):
                 targets = [f"{node.module}.{a.name}" if f"{node.module}.{a.name}" in modules else node.module for a in node.names]
             elif isinstance(node, ast.Import):
@@ -186,7 +192,7 @@ def test_entry_points_that_point_up_the_layers_are_the_named_ones():
     found = set()
     for path in ROOT.rglob("*.py"):
         part = path.relative_to(ROOT).parts[0].removesuffix(".py")
-        for node in ast.walk(_parsed(path)):
+        for node in _walked(_parsed(path)):
             if (
                 isinstance(node, ast.Constant)
                 and isinstance(node.value, str)
@@ -219,11 +225,17 @@ def _functions(tree: ast.AST) -> Iterator[tuple[str, ast.FunctionDef | ast.Async
     return visit(tree, "")
 
 
+@functools.cache
+def _listed_functions(tree: ast.AST) -> tuple[tuple[str, ast.FunctionDef | ast.AsyncFunctionDef], ...]:
+    """:func:`_functions` of ``tree``, listed once for both checks that read them."""
+    return tuple(_functions(tree))
+
+
 def _long_signatures(tree: ast.AST) -> set[str]:
     """``name`` (``Class.name`` for a method) of each function in ``tree`` that takes more than
     MAX_PARAMETERS parameters and is not an @njit kernel."""
     found = set()
-    for name, f in _functions(tree):
+    for name, f in _listed_functions(tree):
         a = f.args
         names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ("self", "cls")]
         names += [x.arg for x in (a.vararg, a.kwarg) if x is not None]
@@ -242,7 +254,9 @@ MAX_LINES = 60  # a function's lines, its decorators, signature and docstring in
 
 def _long_functions(tree: ast.AST) -> set[str]:
     """``name`` (``Class.name`` for a method) of each function in ``tree`` longer than MAX_LINES."""
-    return {name for name, f in _functions(tree) if f.end_lineno - min([f.lineno, *(d.lineno for d in f.decorator_list)]) + 1 > MAX_LINES}
+    return {
+        name for name, f in _listed_functions(tree) if f.end_lineno - min([f.lineno, *(d.lineno for d in f.decorator_list)]) + 1 > MAX_LINES
+    }
 
 
 def test_no_function_is_longer_than_60_lines():
@@ -296,7 +310,7 @@ def _private_uses(tree: ast.AST, module: str, modules: set[str]) -> set[str]:
         return name.startswith("_") and not name.endswith("__")
 
     found, bound = set(), {}  # bound: a name in the file -> the terrapref module it is
-    for node in ast.walk(tree):
+    for node in _walked(tree):
         if isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:  # relative: resolved against the module's own package
@@ -312,7 +326,7 @@ def _private_uses(tree: ast.AST, module: str, modules: set[str]) -> set[str]:
             for alias in node.names:
                 if alias.name.startswith("terrapref"):  # ``import terrapref.a.b`` binds terrapref; ``... as m``, the module
                     bound[alias.asname or "terrapref"] = alias.name if alias.asname else "terrapref"
-    for node in ast.walk(tree):
+    for node in _walked(tree):
         if isinstance(node, ast.Attribute) and private(node.attr):
             first, *rest = ast.unparse(node.value).split(".")
             target = ".".join([bound[first], *rest]) if first in bound else None  # ``pkg.b._x``: pkg's module, then b

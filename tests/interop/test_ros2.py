@@ -645,6 +645,35 @@ def test_each_message_type_is_cdr_identical_to_rosbags_and_announces_its_rihs01(
     assert dds_topic("/terrapref/cmd_vel") == "rt/terrapref/cmd_vel"
 
 
+def test_a_camera_sized_image_and_grid_are_copied_as_bytes_and_stay_cdr_identical():
+    """Sequences of bytes (an image's data, an occupancy grid's) go out in one copy and an image's
+    come back as bytes, with rosbags' bytes on the wire; a grid's signed cells still read back as numbers."""
+    from terrapref.camera import CameraConfig
+    from terrapref.interop import ros_messages as rm
+    from terrapref.interop.dds import MessageTypes
+
+    ts = rm.typestore()
+    types = MessageTypes(ts)
+    rng = np.random.default_rng(0)
+    camera = CameraConfig()
+    ids = rng.integers(0, 256, (camera.height_px, camera.width_px)).astype(np.uint8)
+    h = rm.header(ts, 1.25, "camera_optical")
+    image = ts.types["sensor_msgs/msg/Image"](
+        header=h, height=ids.shape[0], width=ids.shape[1], encoding="mono8", is_bigendian=0, step=ids.shape[1], data=ids.ravel()
+    )
+    cells = rng.integers(-1, 101, (200, 300)).astype(np.int8)
+    grid = rm.occupancy_grid(ts, h, cells, 0.1, (-10.0, -15.0))
+    for msgtype, msg in (("sensor_msgs/msg/Image", image), ("nav_msgs/msg/OccupancyGrid", grid)):
+        ours = types.to_idl(msg, msgtype).serialize()
+        assert ours == bytes(ts.serialize_cdr(msg, msgtype)), msgtype
+    back = types.idl("sensor_msgs/msg/Image").deserialize(types.to_idl(image, "sensor_msgs/msg/Image").serialize())
+    assert isinstance(back.data, bytes) and np.array_equal(np.frombuffer(back.data, np.uint8).reshape(ids.shape), ids)
+    cells_back = types.idl("nav_msgs/msg/OccupancyGrid").deserialize(types.to_idl(grid, "nav_msgs/msg/OccupancyGrid").serialize()).data
+    assert sorted(set(cells_back)) == sorted(set(cells.ravel().tolist())) and min(cells_back) == -1  # signed, as sent
+    listed = types.idl("nav_msgs/msg/OccupancyGrid")(**{**vars(types.to_idl(grid, "nav_msgs/msg/OccupancyGrid")), "data": [-1, 5]})
+    assert types.idl("nav_msgs/msg/OccupancyGrid").deserialize(listed.serialize()).data == [-1, 5]  # a list still goes through
+
+
 def test_a_number_in_exponent_form_is_a_number_as_ros_2_reads_it():
     """YAML 1.1 reads ``1e-9`` (no point) as a string; ROS 2's parameter parser as a double."""
     from terrapref.interop.ros2 import RosArgs

@@ -522,13 +522,17 @@ class Frames:
         """Class ids (H, W) uint8 of the label ids ``ids`` (the image stamped ``t`` [s]), undistorted;
         the pixels counted. An id the label map does not list is an error unless the map makes it unknown."""
         c = self.conversion
-        unmapped = int(np.count_nonzero(~c.listed[ids]))
+        counts = np.bincount(ids.ravel())  # pixels per label id: what the checks and the shares count
+        unmapped = int(counts[~c.listed[: len(counts)]].sum())
         if unmapped:
             c.labels.refuse_unlisted(ids, f"the image stamped {t:.3f} s")
-        image = c.lut[ids]
-        image = undistorted(image, c.undistort, UNKNOWN)
+        image = np.take(c.lut, ids)
         self.pixels += ids.size
         self.unmapped += unmapped
+        if c.undistort is None:
+            self.unknown += int(counts[c.lut[: len(counts)] == UNKNOWN].sum())
+            return image
+        image = undistorted(image, c.undistort, UNKNOWN)
         self.unknown += int(np.count_nonzero(image == UNKNOWN))
         return image
 
