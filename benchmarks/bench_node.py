@@ -6,6 +6,8 @@ log played in real time (and faster) it keeps up with.
 (a) core: the node's own work per frame (``PlannerNodeCore``: the PNG decoded, the odometry
     interpolated to the image's stamp, the planner's decision), fed a log's messages in this
     process, without DDS; the median per frame and its ratio to the reference.
+(w) wire: a raw 640 x 480 label image (``mono8``) and depth image (``32FC1``), as a robot
+    publishes them, serialised through the node's DDS types and read back; the medians.
 (b) played: ``terrapref ros2`` in a process of its own, a log played to it by ``terrapref play``
     at each rate (1: the log's own pace); the frames it decided on out of those played. The node,
     the player and this process share the machine, as on a robot: no core pinning.
@@ -121,6 +123,36 @@ def played(bag: Path, robot: Path, model: Path, rate: float, domain: int) -> tup
     return decided, frames
 
 
+def wire_times(repeat: int = 50) -> dict[str, tuple[float, float]]:
+    """Median seconds to serialise and to read back a raw label image and a depth image (640 x 480)."""
+    from terrapref.interop import ros_messages as rm
+    from terrapref.interop.dds import MessageTypes
+
+    ts = rm.typestore()
+    types = MessageTypes(ts)
+    rng = np.random.default_rng(0)
+    h = rm.header(ts, 1.0, "camera_optical")
+    images = {
+        "mono8": rng.integers(0, 20, (480, 640)).astype(np.uint8),
+        "32FC1": rng.uniform(0.5, 20.0, (480, 640)).astype(np.float32),
+    }
+    out = {}
+    for encoding, pixels in images.items():
+        data = pixels.view(np.uint8).ravel()
+        msg = ts.types["sensor_msgs/msg/Image"](
+            header=h, height=480, width=640, encoding=encoding, is_bigendian=0, step=data.size // 480, data=data
+        )
+        cls, times = types.idl("sensor_msgs/msg/Image"), []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            wire = types.to_idl(msg, "sensor_msgs/msg/Image").serialize()
+            t1 = time.perf_counter()
+            cls.deserialize(wire)
+            times.append((t1 - t0, time.perf_counter() - t1))
+        out[encoding] = tuple(np.median(np.array(times), axis=0))
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", help="the model the node drives with (default: recipe teach, a few epochs on the drive)")
@@ -139,6 +171,11 @@ def main() -> None:
         f"node core, per frame (png decoded, odometry at its stamp, decision): median {np.median(t) * 1e3:.2f} ms "
         f"({1.0 / np.median(t):.0f} frames/s) over {len(t)} frames; median / reference {np.median(t) * 1e3 / ref:.3f}"
     )
+    for encoding, (write_s, read_s) in wire_times().items():
+        print(
+            f"wire, a raw 640 x 480 {encoding} image through the node's DDS types: serialised {write_s * 1e3:.2f} ms, "
+            f"read back {read_s * 1e3:.2f} ms; / reference {write_s * 1e3 / ref:.4f} and {read_s * 1e3 / ref:.4f}"
+        )
     for rate in (float(r) for r in args.rates.split(",")):
         decided, messages = played(bag, robot, model, rate, args.domain)
         frames = len(t)
