@@ -4,6 +4,7 @@ class names), and every command treats an existing output the same way."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -206,6 +207,20 @@ def test_every_command_refuses_an_existing_output_without_force_and_replaces_it_
     one_line_error(capsys, str(out), "exists", "--force")
     assert _state(out) == before  # untouched
     assert main([*argv, "--force"]) == 0
+
+
+def test_inspects_default_figure_in_the_recording_is_refused_once_there_unless_forced(tmp_path: Path, tiny_recording: Path, capsys):
+    """``DIR/driven_path.png`` is an output like any other: a second inspect asks for --force before any work."""
+    rec = tmp_path / "rec"
+    shutil.copytree(tiny_recording, rec)
+    assert main(["inspect", str(rec), "--no-preference"]) == 0
+    figure = rec / "driven_path.png"
+    before = figure.read_bytes()
+    capsys.readouterr()
+    assert main(["inspect", str(rec), "--no-preference"]) == 2
+    one_line_error(capsys, str(figure), "exists", "--force")
+    assert figure.read_bytes() == before
+    assert main(["inspect", str(rec), "--no-preference", "--force"]) == 0
 
 
 def test_two_evaluations_into_one_folder_leave_one_run_whole(tmp_path: Path, tiny_recording: Path, capsys):

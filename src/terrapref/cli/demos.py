@@ -277,9 +277,10 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     rec = read_recording(args.recording)
     if getattr(args, "classes", None) is not None:
         check_table(args, rec.classes, args.recording)
-    summary = summarise(rec)
     out = args.out or rec.path / "driven_path.png"
-    check_figure(out, "--out")
+    if args.out is None:  # the default figure, in the recording: refused before any work as any output is
+        check_output(out, "--out", force=args.force)
+    summary = summarise(rec)
     # Every frame is read before the figure is written: a damaged one leaves the old figure as it was.
     shows = [] if args.no_preference else _what_the_drive_shows(rec)
     for line in summary.lines():
