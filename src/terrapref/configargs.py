@@ -79,6 +79,14 @@ def finite_float(text: str) -> float:
     return value
 
 
+def positive_float(text: str) -> float:
+    """A flag's number, refused (by argparse, naming the flag) unless finite and > 0."""
+    value = finite_float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not > 0")
+    return value
+
+
 def _fields(cls: type) -> Iterator[tuple[dataclasses.Field, type | None]]:
     for f in dataclasses.fields(cls):
         yield f, _nested(cls, f)

@@ -502,6 +502,12 @@ def test_record_onto_a_full_disk_keeps_the_recording_it_replaces_and_no_hidden_f
         (["render", "demo_course", "--pose", "8", "10", "--out", "s.png"], ("terrapref render", "--pose", "expected 3 arguments")),
         (["record", "teach_course"], ("terrapref record", "--out")),
         (["drive-it"], ("terrapref", "invalid choice", "'drive-it'")),
+        (["record", "teach_course", "--preview", "-1", "--out", "r"], ("terrapref record", "--preview", "'-1' is not > 0")),
+        (["record", "teach_course", "--lateral-accel", "0", "--out", "r"], ("terrapref record", "--lateral-accel", "'0' is not > 0")),
+        (
+            ["train", "rec", "--stage-weight", "-5", "--out", "m.safetensors"],
+            ("terrapref train", "--stage-weight", "'-5' is not between 0"),
+        ),
     ],
 )
 def test_the_command_lines_own_refusals_are_one_line(capsys, argv: list[str], needles: tuple[str, ...]):

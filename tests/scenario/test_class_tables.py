@@ -217,6 +217,14 @@ def test_a_bad_table_is_refused_naming_the_file_and_field(tmp_path, table, field
     assert all(w in lines[0] for w in words), lines[0]
 
 
+def test_a_table_without_a_background_line_says_it_is_missing(tmp_path):
+    path = _write_table(tmp_path, "grass", ["tree"], ["grass", "mud", "tree"])
+    path.write_text("".join(line for line in path.read_text().splitlines(keepends=True) if not line.startswith("background:")))
+    with pytest.raises(ConfigError) as caught:
+        load_classes(path)
+    assert caught.value.lines() == [f"{path}: background: missing: name the class of the ground between patches (one of the table's)"]
+
+
 def test_the_constructor_checks_what_from_dict_checks():
     classes = (TerrainClass(0, "grass", (0, 0, 0)), TerrainClass(1, "mud", (1, 1, 1)), TerrainClass(2, "tree", (2, 2, 2)))
     assert ClassTable(classes, "grass", ("tree",), ("mud", "tree")).feature_names == ("mud", "tree")

@@ -23,7 +23,7 @@ from terrapref.cli.common import (
     perception_model,
     warn_partial,
 )
-from terrapref.configargs import finite_float
+from terrapref.configargs import finite_float, positive_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_figure, check_output, check_tensor_file
 
@@ -137,8 +137,8 @@ def record_parser(sub: argparse._SubParsersAction) -> None:
         metavar="CLASS=MPS,...",
         help="cruising speed per class [m/s], the background class included, e.g. grass=1.6,mud=0.5 (classes not named keep the style's)",
     )
-    p.add_argument("--lateral-accel", type=finite_float, metavar="MPS2", help="lateral acceleration the driver keeps to in bends [m/s^2]")
-    p.add_argument("--preview", type=finite_float, metavar="M", help="how early the driver slows before a slower class [m]")
+    p.add_argument("--lateral-accel", type=positive_float, metavar="MPS2", help="lateral acceleration the driver keeps to in bends [m/s^2]")
+    p.add_argument("--preview", type=positive_float, metavar="M", help="how early the driver slows before a slower class [m]")
     p.add_argument(
         "--relief-style",
         metavar="NAME[,K=V,...]",

@@ -266,10 +266,20 @@ def train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
         )
         rules.add_argument(
             "--stage-weight",
-            type=finite_float,
+            type=_stage_weight,
             default=None,
             help="the second stage's weight against log F_t in the decision (recipe teach: 5.0)",
         )
+
+
+def _stage_weight(text: str) -> float:
+    """--stage-weight's number: finite, 0 to the most a model file holds."""
+    from terrapref.rules.base import MOST_NUMBER
+
+    value = finite_float(text)
+    if not 0 <= value <= MOST_NUMBER:
+        raise argparse.ArgumentTypeError(f"{text!r} is not between 0 and {MOST_NUMBER:g}")
+    return value
 
 
 def _cmd_recipes(args: argparse.Namespace) -> int:

@@ -44,6 +44,8 @@ def parse_speeds(text: str, source: str = "--speeds") -> tuple[tuple[str, float]
             speed = float(value)
         except ValueError:
             speed = math.nan
+        if sep and name and not math.isfinite(speed) and value.strip().lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            raise UserError(source, f"class {name!r}: a cruising speed is a finite number of m/s, got {value.strip()}")
         if not sep or not name or not math.isfinite(speed):
             raise UserError(source, f"expected CLASS=SPEED entries in m/s separated by commas, e.g. grass=1.6,mud=0.5; got {item!r}")
         if name in dict(pairs):

@@ -212,7 +212,9 @@ class ClassTable:
         # also reported as an unknown background or lethal class.
         names = {row["name"] for row in rows if isinstance(row, dict) and isinstance(row.get("name"), str)}
         background = data.get("background")
-        if not isinstance(background, str) or background not in names:
+        if background is None:
+            problems.append(Problem("background", "missing: name the class of the ground between patches (one of the table's)"))
+        elif not isinstance(background, str) or background not in names:
             problems.append(Problem("background", f"unknown class {background!r}"))
         lethal = data.get("lethal", [])
         problems += _lethal_problems(lethal, names, background)

@@ -89,7 +89,10 @@ class SecondStageConfig(RuleConfig):
             and self.candidates >= 1
             and self.stride >= 1
         ):
-            raise ValueError(f"the second stage needs after_s > 0, weight 0 to {MOST_NUMBER:g}, candidates >= 1 and stride >= 1")
+            raise ValueError(
+                f"the second stage needs after_s > 0, weight 0 to {MOST_NUMBER:g}, candidates >= 1 and stride >= 1; "
+                f"got after_s {self.after_s:g}, weight {self.weight:g}, candidates {self.candidates}, stride {self.stride}"
+            )
 
     @property
     def lookahead_config(self) -> LookaheadConfig:
