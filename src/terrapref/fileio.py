@@ -157,20 +157,23 @@ def check_figure(out: str | Path, flag: str) -> None:
 
 
 def check_tensor_file(out: str | Path, flag: str) -> None:
-    """A model or dataset (safetensors) is never named ``.onnx``: every command reads a file of
-    that suffix as ONNX, so the file would be refused where it is used.
+    """A model or dataset is a safetensors file, named so: never ``.onnx`` (every command reads a
+    file of that suffix as ONNX, so the file would be refused where it is used), nor another suffix.
 
     Raises:
-        UserError: ``out``'s suffix is ``.onnx`` (naming ``flag``).
+        UserError: ``out``'s suffix is not ``.safetensors`` (naming ``flag``).
     """
     from terrapref.errors import UserError
 
-    if Path(out).suffix.lower() == ".onnx":
+    suffix = Path(out).suffix.lower()
+    if suffix == ".onnx":
         raise UserError(
             str(out),
             "a .onnx file is read as ONNX; name the file .safetensors (terrapref export --format onnx makes the ONNX file)",
             field=flag,
         )
+    if suffix != ".safetensors" and not Path(out).is_dir():  # a folder: check_output says what it is
+        raise UserError(str(out), "a model or dataset is a safetensors file: give it the suffix .safetensors", field=flag)
 
 
 def check_distinct_outputs(outputs: Sequence[tuple[str, str | Path | None]]) -> None:

@@ -31,6 +31,32 @@ def test_train_refuses_a_folder_as_its_model_file(tmp_path: Path, capsys):
     assert "expected a file name" in _error(capsys)
 
 
+def test_train_and_featurize_name_their_output_safetensors(tmp_path: Path, capsys):
+    data = dataset_file(tmp_path / "train.safetensors")
+    assert main(["train", str(data), "--out", str(tmp_path / "m.txt"), "--epochs", "1"]) == 2
+    assert "m.txt: --out: a model or dataset is a safetensors file: give it the suffix .safetensors" in _error(capsys)
+    assert main(["featurize", str(data), "--out", str(tmp_path / "d")]) == 2
+    assert "give it the suffix .safetensors" in _error(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["train.safetensors"]
+
+
+def test_train_says_an_input_is_missing_before_what_lies_where_it_would_write(tmp_path: Path, capsys):
+    (tmp_path / "m.loss.png").write_bytes(b"an earlier curve")
+    assert main(["train", str(tmp_path / "nosuch"), "--out", str(tmp_path / "m.safetensors")]) == 2
+    assert "nosuch: no such file" in _error(capsys)
+
+
+def test_a_training_beside_what_an_interrupted_one_left_keeps_it_and_says_so(tmp_path: Path, capsys):
+    data = dataset_file(tmp_path / "train.safetensors", n=64)
+    left = [tmp_path / "m.interrupted.safetensors", tmp_path / "m.checkpoints.interrupted"]
+    left[0].write_bytes(b"the best epochs of a stopped run")
+    left[1].mkdir()
+    capsys.readouterr()
+    assert main(["train", str(data), "--recipe", "paper", "--epochs", "1", "--out", str(tmp_path / "m.safetensors")]) == 0
+    assert f"note: {left[0]} and {left[1]}: left by an earlier run that was interrupted; kept" in capsys.readouterr().out
+    assert all(p.exists() for p in left)
+
+
 def test_evaluate_refuses_a_file_as_its_folder_before_driving(tmp_path: Path, capsys):
     model = linear_model(tmp_path / "m.safetensors")
     (tmp_path / "eval").write_text("not a folder")

@@ -21,7 +21,7 @@ if TYPE_CHECKING:  # for the hints only: the command line imports what a command
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    from terrapref.learning.pipeline import RunOptions, interrupted_path, train_and_save
+    from terrapref.learning.pipeline import RunOptions, train_and_save
     from terrapref.learning.train import DATASET
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named, rules_with
 
@@ -29,6 +29,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     config = _train_config(args, recipe)
     recipe = replace(recipe, rules=rules_with(recipe, getattr(args, "second_stage", None), getattr(args, "stage_weight", None)))
     check_distinct(args.data, "recording or dataset")
+    if missing := next((p for p in args.data if not Path(p).exists()), None):  # said before anything about the output
+        raise UserError(str(missing), "no such file")
     check_tensor_file(args.out, "--out")
     check_output(args.out, "--out", args.data, force=args.force)
     _check_beside(Path(args.out), args.data, args.force)
@@ -67,15 +69,24 @@ def _cmd_train(args: argparse.Namespace) -> int:
     except UserError as exc:  # a rule's configuration in a dataset file: named by the file it came from
         raise UserError(str(args.data[0]), exc.problems) if exc.source == DATASET else exc from None
     except KeyboardInterrupt:
-        if interrupted_path(args.out).exists():
+        if _interrupted_outputs(args.out):
             print(
-                f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no decision rules); "
-                f"{args.out} is untouched",
+                f"note: the best epochs so far are in {' and '.join(map(str, _interrupted_outputs(args.out)))} "
+                f"(the model marked interrupted: no decision rules); {args.out} is untouched",
                 file=sys.stderr,
             )
         raise
     _report_training(args, config, data, result)
+    if _interrupted_outputs(args.out):  # an earlier run's, stopped: kept, as every output is, named so as not to be taken for this one's
+        print(f"note: {' and '.join(map(str, _interrupted_outputs(args.out)))}: left by an earlier run that was interrupted; kept")
     return 0
+
+
+def _interrupted_outputs(out: Path) -> list[Path]:
+    """What an interrupted training leaves beside ``out`` (its model so far, its checkpoints), of those there."""
+    from terrapref.learning.pipeline import checkpoints_path, interrupted_path
+
+    return [p for p in (interrupted_path(out), Path(f"{checkpoints_path(out)}.interrupted")) if p.exists()]
 
 
 def _check_beside(out: Path, inputs: list[Path], force: bool) -> None:
