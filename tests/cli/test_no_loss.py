@@ -223,6 +223,17 @@ def test_inspects_default_figure_in_the_recording_is_refused_once_there_unless_f
     assert main(["inspect", str(rec), "--no-preference", "--force"]) == 0
 
 
+def test_a_run_never_replaces_a_recording_even_with_force(tmp_path: Path, tiny_recording: Path, capsys):
+    from helpers import linear_model
+
+    rec = tmp_path / "rec"
+    shutil.copytree(tiny_recording, rec)
+    model = linear_model(tmp_path / "m.safetensors")
+    assert main(["evaluate", str(model), str(TINY_COURSE), "--seeds", "1", "--no-driver", "--out", str(rec), "--force"]) == 2
+    one_line_error(capsys, str(rec), "--out", "is a recording")
+    assert len(read_recording(rec)) == len(read_recording(tiny_recording))
+
+
 def test_two_evaluations_into_one_folder_leave_one_run_whole(tmp_path: Path, tiny_recording: Path, capsys):
     """A second evaluate while the first writes is refused, even with --force; one after another,
     the second (with --force) replaces the first whole: no figure of the first is left beside it."""

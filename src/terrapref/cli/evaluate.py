@@ -15,6 +15,7 @@ from terrapref.cli.common import (
     add_engine_args,
     add_force_arg,
     add_live_args,
+    check_run_folder,
     check_table,
     class_table,
     counted,
@@ -25,7 +26,7 @@ from terrapref.cli.common import (
     watching,
 )
 from terrapref.errors import UserError
-from terrapref.fileio import check_distinct, check_output, output_folder
+from terrapref.fileio import check_distinct, output_folder
 
 if TYPE_CHECKING:
     from terrapref.evaluation.evaluate import Evaluation
@@ -52,7 +53,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise UserError("--seeds", "must be >= 1")
     runs = _checked_runs(args)
     check_distinct(args.scenarios, "scenario")
-    check_output(args.out, "--out", [args.model, *args.scenarios], folder=True)
+    check_run_folder(args.out, [args.model, *args.scenarios])
     engine = grid_engine(args)
     if args.mcap:
         from terrapref.extras import check

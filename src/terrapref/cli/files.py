@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from terrapref.cli.common import add_classes_arg, add_force_arg, check_table, class_table, output_path
+from terrapref.cli.common import add_classes_arg, add_force_arg, check_run_folder, check_table, class_table, output_path
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_output, output_folder
@@ -51,7 +51,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     model = Model.load(args.model)
     robot = load_robot(args.robot, model.classes, f"--model {args.model}")
     out = Path(args.out)
-    check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
+    check_run_folder(out, [args.bag, args.model, args.robot])
     with output_folder(out, args.force):  # refused (another camera) or stopped: nothing unfinished is left at OUT
         return _replay_into(args, model, robot, out)
 

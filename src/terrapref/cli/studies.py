@@ -13,6 +13,7 @@ from terrapref.cli.common import (
     add_force_arg,
     add_large_arg,
     announce_workload,
+    check_run_folder,
     check_table,
     given_files,
     grid_engine,
@@ -22,7 +23,7 @@ from terrapref.cli.common import (
     teachable_table,
 )
 from terrapref.errors import UserError
-from terrapref.fileio import check_output, output_folder
+from terrapref.fileio import output_folder
 
 if TYPE_CHECKING:
     from terrapref.grid import Engine
@@ -46,7 +47,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
     perceptions = perception_list(args.perception)
-    check_output(args.out, "--out", given_files(args, "classes", "perception", "taught_under", "course"), folder=True)
+    check_run_folder(args.out, given_files(args, "classes", "perception", "taught_under", "course"))
     engine = grid_engine(args)
     setup = Reproduction(
         recipes,
@@ -135,7 +136,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         plan = replace(plan, follow_up=args.follow_up)
         if perceptions is not None:
             plan = with_perception(plan, perceptions)
-    check_output(args.out, "--out", given_files(args, "classes", "perception", "taught_under", "course"), folder=True)
+    check_run_folder(args.out, given_files(args, "classes", "perception", "taught_under", "course"))
     engine = grid_engine(args)
     announce_workload("study", study_workload(plan), engine, args.large, "--seeds", "seeds")
     with output_folder(args.out, args.force):
@@ -202,7 +203,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
         )
     STYLES.get(args.style, "--style")
     _check_select_sizes(args)
-    check_output(args.out, "--out", given_files(args, "classes", "perception", "taught_under", "course"), folder=True)
+    check_run_folder(args.out, given_files(args, "classes", "perception", "taught_under", "course"))
     perceptions = perception_list("clean" if args.perception is None else args.perception, table)
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
