@@ -367,6 +367,46 @@ def test_a_speed_rule_slowing_for_a_column_the_class_table_calls_safe_is_refused
     assert err.value.lines()[0].endswith(f"rules[{len(rules) - 1}].lethal: column 0 is not lethal in the file's class table")
 
 
+@pytest.mark.parametrize(
+    ("background", "said"),
+    [
+        ("lava", "unknown class 'lava'; the file's class table's background is 'grass'"),
+        ("mud", "not the background class 'mud'; the file's class table's background is 'grass'"),
+    ],
+)
+def test_a_speed_rule_naming_a_background_its_class_table_does_not_is_refused_where_the_model_is_read(tmp_path, capsys, background, said):
+    """A speed rule keeps a speed for the table's background under that class's name; a file edited
+    to name another class there (one the table lacks, or one of its own columns) is refused by
+    every command that reads it, and ``info`` shows it as not readable. A block naming none (a file
+    older than the field) reads with any table."""
+    from test_interop import speed_block
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+    from terrapref.cli import main
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    meta = _offset_meta(DRIVER_LIKE)
+    for name in (None, "grass"):
+        block = speed_block(1.0) | ({"background": name} if name else {})
+        Planner(
+            load_model(
+                save_model(tmp_path / "ok.safetensors", config, skip_path_weights(config), {**meta, "rules": [*meta["rules"], block]})
+            )
+        )
+    rules = [*meta["rules"], {**speed_block(1.0), "background": background}]
+    path = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**meta, "rules": rules})
+    with pytest.raises(UserError) as err:
+        Planner(load_model(path))
+    assert err.value.lines() == [f"{path}: rules[1].background: {said}"]
+    assert main(["info", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert f"{path}: terrapref model (classifier), NOT READABLE: rules[1].background: {said}" in captured.out
+    assert captured.err.splitlines() == [f"error: {path}: rules[1].background: {said}"]
+    assert main(["evaluate", str(path), "gen:7", "--seeds", "1", "--out", str(tmp_path / "ev")]) == 2
+    assert capsys.readouterr().err.splitlines() == [f"error: {path}: rules[1].background: {said}"]
+    assert not (tmp_path / "ev").exists()
+
+
 SPEEDS_SAID = "expected 5 cruising speeds > 0 and at most 50 m/s, one per terrain column and the background"
 
 

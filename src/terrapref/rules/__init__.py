@@ -138,12 +138,26 @@ def rules_of(model: LoadedModel) -> tuple[tuple[Rule, ...], str | None]:
     raw = model.meta.get("features")
     read = read_rules(blocks, model.features, raw if isinstance(raw, Mapping) else {}, model.path, key)
     _check_sets_speed(read, model.header.sets_speed, model.path)
+    _check_class_table(read, model, key)
+    return read, model.header.drives
+
+
+def _check_class_table(rules: Sequence[Rule], model: LoadedModel, key: str) -> None:
+    """What a speed rule says of the file's classes must be what its class table says: the columns
+    it keeps off are lethal there (a file older than lethal columns lists none), and the class it
+    names as the background (a file older than that field names none) is the table's background."""
     lethal = set(model.classes.lethal_columns(model.features.feature_classes))
-    for i, rule in enumerate(read):
-        if isinstance(rule, SpeedRule) and not set(rule.model.lethal) <= lethal:  # a file older than lethal columns lists none
+    background = model.classes.background
+    for i, rule in enumerate(rules):
+        if not isinstance(rule, SpeedRule):
+            continue
+        if not set(rule.model.lethal) <= lethal:
             named = ", ".join(str(c) for c in sorted(set(rule.model.lethal) - lethal))
             raise UserError(model.path, f"column {named} is not lethal in the file's class table", field=f"{key}[{i}].lethal")
-    return read, model.header.drives
+        if rule.background is not None and rule.background != background:
+            said = "unknown class" if rule.background not in model.classes.names else "not the background class"
+            message = f"{said} {rule.background!r}; the file's class table's background is {background!r}"
+            raise UserError(model.path, message, field=f"{key}[{i}].background")
 
 
 def rules_in(meta: Mapping[str, Any], source: str) -> tuple[tuple[Rule, ...], Rule]:

@@ -276,7 +276,9 @@ class SpeedRule(Rule):
     config: SpeedConfig
     model: SpeedModel
     fit: SpeedFit | None = None
-    background: str = "background"  # the class table's background class, by name (the last terrain column's)
+    # The class table's background class, by name (the last terrain column's); None: not named (a
+    # file older than the field), printed as "background".
+    background: str | None = None
 
     @classmethod
     def setting_problem(cls, name: str, value: float) -> str | None:
@@ -323,7 +325,7 @@ class SpeedRule(Rule):
             "lethal": list(m.lethal),
             "min_points": m.min_points,
             "drive_lateral_mps2": m.drive_lateral_mps2,
-            "background": self.background,
+            **({"background": self.background} if self.background is not None else {}),
         }
         if m.sheds_on_grades:  # a flat drive's model file is as it was before grades were learned
             out |= {"up_mps_per_deg": m.up_mps_per_deg, "down_mps_per_deg": m.down_mps_per_deg, "grades_across": m.grades_across}
@@ -401,8 +403,8 @@ class SpeedRule(Rule):
                 "grade_frames" in block,
                 _rough_shown(block),
             )
-        background = block.get("background", "background")
-        if not isinstance(background, str) or not background:
+        background = block.get("background")
+        if background is not None and (not isinstance(background, str) or not background):
             raise where.error("background", "expected the background class's name")
         return cls(config, model, fit, background)
 
@@ -486,7 +488,7 @@ class SpeedRule(Rule):
 
     def _classes(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[tuple[int, str]]:
         """(column, class) of every terrain column a speed is kept for: ``names``, then the background; not the lethal ones."""
-        return [(col, name) for col, name in enumerate((*names, self.background)) if name not in lethal]
+        return [(col, name) for col, name in enumerate((*names, self.background or "background")) if name not in lethal]
 
 
 def _grades_across(block: Mapping[str, Any], where: Where) -> bool:
