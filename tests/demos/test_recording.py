@@ -783,6 +783,27 @@ def test_a_complete_recordings_frame_count_that_is_not_a_count_is_refused(tmp_pa
     assert err.value.problems[0].field == "frames" and err.value.source.endswith(META)
 
 
+@pytest.mark.parametrize(
+    ("status", "said"),
+    [("weird", "expected 'partial' or 'complete', got string 'weird'"), (None, "missing; expected 'partial' or 'complete'")],
+    ids=["unknown", "missing"],
+)
+def test_a_status_neither_partial_nor_complete_is_refused_naming_it(tmp_path: Path, tiny_recording: Path, capsys, status, said: str):
+    """A finished run edited to some other status was read as a partial one, which skips the check
+    that a finished run holds all its frames; it is refused, and nothing is written."""
+    from helpers import one_line_error
+    from terrapref.cli import main
+
+    rec = tmp_path / "copy"
+    shutil.copytree(tiny_recording, rec)
+    meta = {k: v for k, v in json.loads((rec / META).read_text()).items() if k != "status"}
+    (rec / META).write_text(json.dumps(meta | ({"status": status} if status is not None else {})))
+    out = tmp_path / "d.safetensors"
+    assert main(["featurize", str(rec), "--out", str(out)]) == 2
+    assert one_line_error(capsys) == f"error: {rec / META}: status: {said}"
+    assert not out.exists()
+
+
 def test_a_camera_number_written_as_text_is_named_field_by_field(tmp_path: Path):
     """meta.json's camera.width_px as "640": named, not a comparison's TypeError about camera."""
     out = tmp_path / "rec"

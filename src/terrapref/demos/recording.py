@@ -57,6 +57,7 @@ if TYPE_CHECKING:
 
 FORMAT = "terrapref-recording/1"
 META = "meta.json"
+STATUSES = ("partial", "complete")  # meta.json's status: until the run finishes, and after
 FRAMES = "frames.jsonl"
 SCENARIO = "scenario.yaml"
 IMAGES = "images"
@@ -669,8 +670,14 @@ def _check_frame(row: dict, previous: dict | None, frames_path: Path, line_no: i
 
 def _is_complete(meta: dict, frames: _Frames, frames_path: Path) -> bool:
     """Whether the run finished; a finished run must hold the frames its meta.json declares, and
-    no cut last line (which only a recorder killed before it finished leaves)."""
-    if meta.get("status") != "complete":
+    no cut last line (which only a recorder killed before it finished leaves). A status that is
+    neither is refused: a partial run read as one would lose the check of a finished run's frames."""
+    status = meta.get("status")
+    if status not in STATUSES:
+        allowed = " or ".join(map(repr, STATUSES))
+        said = f"expected {allowed}, got {described(status)}" if "status" in meta else f"missing; expected {allowed}"
+        raise UserError(str(frames_path.parent / META), said, field="status")
+    if status != "complete":
         return False
     f = len(frames.rows)
     declared = meta.get("frames")
