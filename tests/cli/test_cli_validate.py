@@ -175,6 +175,11 @@ BAD_FILES: list[tuple[str, str | bytes, str]] = [
     ("astronomical-cells", edit("size_m: [20.0, 10.0]", "size_m: [1.0e+300, 1.0e+300]"), "world: raster would have about 10^602 cells..."),
     ("duplicate-zone", edit('{id: "2",', "{id: 1,"), "zones[1].id: duplicate zone id '1' (also zones[0])"),
     ("bad-expect", edit("expect: avoid", "expect: maybe"), "zones[1].expect: 'maybe' is neither 'avoid', 'best' nor a known class..."),
+    (
+        "lethal-expect",
+        edit("expect: avoid", "expect: non_traversable"),
+        "zones[1].expect: 'non_traversable' is lethal, and no zone expects lethal terrain (a zone the driver keeps off expects 'avoid')",
+    ),
     ("bad-name", edit("name: tiny_course", "name: tiny course!"), "name: must match [A-Za-z0-9_-]+"),
     (
         "relief-radius",
@@ -204,6 +209,21 @@ def test_validate_bad_file_prints_one_line_and_exits_2(
         assert line.startswith(f"error: {path}: {expected[:-3]}"), line
     else:
         assert line == f"error: {path}: {expected}"
+
+
+def test_a_zone_expecting_lethal_terrain_is_refused_wherever_the_scenario_is_loaded(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Not only ``validate``: ``record`` and ``evaluate`` refuse the scenario too, and write nothing."""
+    from helpers import linear_model
+
+    path = write(tmp_path, "x.yaml", edit("expect: avoid", "expect: non_traversable"))
+    said = f"error: {path}: zones[1].expect: 'non_traversable' is lethal, and no zone expects lethal terrain"
+    model = linear_model(tmp_path / "m.safetensors")
+    for argv in (["record", str(path), "--out", str(tmp_path / "rec")], ["evaluate", str(model), str(path), "--out", str(tmp_path / "ev")]):
+        code, out, err = run_cli(capsys, *argv)
+        assert code == 2 and out == [] and len(err) == 1 and err[0].startswith(said), (argv, out, err)
+    assert not (tmp_path / "rec").exists() and not (tmp_path / "ev").exists()
 
 
 def test_validate_example_from_the_spec(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

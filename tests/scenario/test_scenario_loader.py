@@ -942,6 +942,15 @@ def test_zone_expect_must_be_avoid_best_or_a_class(expect: Any) -> None:
     assert problem.message.startswith(f"{expect!r} is neither 'avoid', 'best' nor a known class")
 
 
+def test_a_zone_expecting_lethal_terrain_is_refused() -> None:
+    """No zone expects lethal terrain (docs/classes.md): a driver is never expected to drive onto it."""
+    problem = only_problem(edited(lambda d: d["zones"][0].update(expect="non_traversable")))
+    assert problem.field == "zones[0].expect"
+    assert (
+        problem.message == "'non_traversable' is lethal, and no zone expects lethal terrain (a zone the driver keeps off expects 'avoid')"
+    )
+
+
 # --- several problems ---------------------------------------------------------------------------
 
 

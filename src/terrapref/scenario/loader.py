@@ -491,6 +491,9 @@ def _zone(c: _Checker, item: dict, field: str, zid: str, size_m: tuple[float, fl
     if not isinstance(expect, str) or expect not in {AVOID, BEST, *classes.names}:
         c.fail(f"{field}.expect", f"{printed(expect)} is neither 'avoid', 'best' nor a known class ({', '.join(classes.names)})")
         expect = None
+    elif expect in classes.lethal:  # a driver is never expected onto it: every profile puts it last
+        c.fail(f"{field}.expect", f"{expect!r} is lethal, and no zone expects lethal terrain (a zone the driver keeps off expects 'avoid')")
+        expect = None
     shape = c.shape(item, field, size_m)
     if shape is not None and expect is not None and isinstance(label, str):
         return Zone(zid, shape, expect, label)
