@@ -804,6 +804,37 @@ def test_a_status_neither_partial_nor_complete_is_refused_naming_it(tmp_path: Pa
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("line", "index", "said"),
+    [
+        (51, 49, "line 51.i: frame index 49 does not follow the previous frame's 49; each frame has its own index, in order"),
+        (60, 12, "line 60.i: frame index 12 does not follow the previous frame's 58; each frame has its own index, in order"),
+        (2, "1", "line 2.i: expected the frame's index, an integer >= 0, got string '1'"),
+    ],
+    ids=["repeats-the-previous", "repeats-an-earlier", "not-an-integer"],
+)
+def test_a_frame_index_out_of_order_or_not_a_number_is_refused_naming_the_line(
+    tmp_path: Path, tiny_recording: Path, capsys, line, index, said
+):
+    """frames.jsonl numbers its frames in order; a line repeating an earlier index is an edit or
+    two recordings run together, refused as a time out of order is. Frames without an index (a
+    recording another tool wrote) read as before."""
+    from helpers import one_line_error
+    from terrapref.cli import main
+
+    rec = tmp_path / "copy"
+    shutil.copytree(tiny_recording, rec)
+    lines = _lines(rec)
+    (rec / FRAMES).write_text("".join(json.dumps({k: v for k, v in row.items() if k != "i"}) + "\n" for row in lines))
+    assert len(read_recording(rec)) == len(lines)
+    lines[line - 1]["i"] = index
+    (rec / FRAMES).write_text("".join(json.dumps(row) + "\n" for row in lines))
+    out = tmp_path / "d.safetensors"
+    assert main(["featurize", str(rec), "--out", str(out)]) == 2
+    assert one_line_error(capsys) == f"error: {rec / FRAMES}: {said}"
+    assert not out.exists()
+
+
 def test_a_camera_number_written_as_text_is_named_field_by_field(tmp_path: Path):
     """meta.json's camera.width_px as "640": named, not a comparison's TypeError about camera."""
     out = tmp_path / "rec"

@@ -474,6 +474,9 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
         return "cmd", f"expected a speed within +-{MAX_CMD[0]:g} m/s and a yaw rate within +-{MAX_CMD[1]:g} rad/s, got {row['cmd']}"
     if isinstance(row["label"], bool) or not isinstance(row["label"], int) or row["label"] < 0:
         return "label", "expected an integer >= 0"
+    index = row.get("i")  # optional: a recording another tool wrote may not number its frames
+    if index is not None and (isinstance(index, bool) or not isinstance(index, int) or index < 0):
+        return "i", f"expected the frame's index, an integer >= 0, got {described(index)}"
     image = row["image"]
     if not isinstance(image, str) or not image.startswith(f"{IMAGES}/") or ".." in image:
         return "image", f"expected a file name under {IMAGES}/"
@@ -665,6 +668,12 @@ def _check_frame(row: dict, previous: dict | None, frames_path: Path, line_no: i
     if previous is not None and not row["t"] > previous["t"]:
         raise UserError(
             str(frames_path), f"time {row['t']} does not follow {previous['t']}; frames must be in time order", field=f"line {line_no}.t"
+        )
+    if previous is not None and row.get("i") is not None and previous.get("i") is not None and not row["i"] > previous["i"]:
+        raise UserError(
+            str(frames_path),
+            f"frame index {row['i']} does not follow the previous frame's {previous['i']}; each frame has its own index, in order",
+            field=f"line {line_no}.i",
         )
 
 
