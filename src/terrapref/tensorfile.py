@@ -19,6 +19,8 @@ from terrapref.fileio import atomic_path
 
 META_KEY = "terrapref"
 REASON_CHARS = 160  # the most of a parser's reason an error line quotes
+# The largest header the safetensors format allows [bytes]: a length past it is no safetensors file's.
+MAX_HEADER_BYTES = 100_000_000
 # The deepest that mappings and lists may lie within one another in a file's metadata: a model's
 # lie 7 deep; far deeper ones would exhaust the readers' recursion.
 MAX_META_DEPTH = 32
@@ -94,6 +96,9 @@ def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) 
             raise UserError(
                 source, f"{unreadable}: an ONNX file (as `terrapref export` writes); give the .safetensors file it was exported from"
             ) from None
+        found = damage(path)
+        if found is not None:
+            raise UserError(source, found) from None
         reason = str(exc)  # a damaged header's reason quotes the header, kilobytes of it
         reason = reason if len(reason) <= REASON_CHARS else reason[: REASON_CHARS - 3] + "..."
         raise UserError(source, f"{unreadable} ({reason})") from None
@@ -104,3 +109,67 @@ def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) 
         got = meta.get("format") if isinstance(meta, dict) else None
         raise UserError(source, f"expected {fmt!r}, got {described(got)}", field="format")
     return tensors, meta
+
+
+def damage(path: str | Path) -> str | None:
+    """What is wrong with a file that begins as a safetensors file (the length of its header, then
+    a JSON header) but that the reader refuses: cut short (and which tensors that loses), or data
+    that no tensor of its header accounts for. None for a file that does not begin so (no
+    safetensors file at all) or whose damage is another."""
+    try:
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            head = fh.read(8)
+            n = int.from_bytes(head, "little") if len(head) == 8 else 0
+            if not 0 < n <= MAX_HEADER_BYTES or fh.read(1) != b"{":
+                return None
+            if 8 + n > size:
+                return f"truncated: the header promises at least {8 + n} bytes, the file has {size} (the header itself is cut short)"
+            fh.seek(8)
+            text = fh.read(n)
+    except OSError:
+        return None
+    try:
+        header = json.loads(text)
+    except (ValueError, RecursionError):
+        return None
+    spans = _spans(header)
+    return None if spans is None else _lost(spans, 8 + n, size - 8 - n)
+
+
+def _spans(header: object) -> list[tuple[str, int, int]] | None:
+    """(name, first byte, end) of each tensor a safetensors header lists, in the order of their
+    data; None where the header is not one."""
+    if not isinstance(header, dict):
+        return None
+    spans = []
+    for name, entry in header.items():
+        if name == "__metadata__":
+            continue
+        offsets = entry.get("data_offsets") if isinstance(entry, dict) else None
+        if not (isinstance(offsets, list) and len(offsets) == 2 and all(isinstance(v, int) and v >= 0 for v in offsets)):
+            return None
+        spans.append((name, offsets[0], offsets[1]))
+    return sorted(spans, key=lambda span: span[1:])
+
+
+def _lost(spans: list[tuple[str, int, int]], start: int, held: int) -> str | None:
+    """What of the tensors ``spans`` a file whose data begins at byte ``start`` and holds ``held``
+    bytes of it lacks, or holds besides them; None where neither."""
+    end = max((e for _, _, e in spans), default=0)
+    if held < end:
+        cut = [name for name, b, e in spans if b < held < e]
+        missing = [name for name, b, e in spans if b >= held and e > b]
+        lost = [f"tensor {cut[0]!r} is cut short"] if cut else []
+        if missing:
+            names = ", ".join(map(repr, missing[:3])) + (f" and {len(missing) - 3} more" if len(missing) > 3 else "")
+            lost.append(f"tensor {names} is missing" if len(missing) == 1 else f"tensors {names} are missing")
+        return f"truncated: the header promises {start + end} bytes, the file has {start + held}; {' and '.join(lost)}"
+    at = 0
+    for name, b, e in spans:
+        if b > at:
+            return f"bytes {at}-{b} of its data belong to no tensor of its header (before tensor {name!r}): a tensor's entry is missing"
+        at = max(at, e)
+    if held > end:
+        return f"the header accounts for {start + end} bytes, the file has {start + held}: a tensor's entry is missing, or bytes were added"
+    return None

@@ -113,6 +113,49 @@ def test_corrupted_model_file_is_refused(model_file, damage: str):
     _expect_user_error(path)
 
 
+def _header_of(raw: bytes) -> tuple[int, dict]:
+    """The length of a safetensors file's header and the header."""
+    n = struct.unpack("<Q", raw[:8])[0]
+    return n, json.loads(raw[8 : 8 + n])
+
+
+def _with_header(header: dict, data: bytes) -> bytes:
+    text = json.dumps(header).encode()
+    text += b" " * (-len(text) % 8)
+    return struct.pack("<Q", len(text)) + text + data
+
+
+@pytest.mark.parametrize("how", ["header cut", "tensor cut", "tensor missing", "entry removed", "bytes added"])
+def test_a_model_file_cut_short_or_missing_a_tensor_says_so_and_names_the_tensor(model_file, how: str):
+    """A safetensors file cut short (a copy or a download that stopped) says so and which tensors
+    it lost, not that it is no model file; so does one whose header lacks a tensor's entry."""
+    path = model_file[0]
+    raw = path.read_bytes()
+    n, header = _header_of(raw)
+    spans = sorted((entry["data_offsets"], name) for name, entry in header.items() if name != "__metadata__")
+    (first, end), last = spans[-1]
+    data = raw[8 + n :]
+    if how == "header cut":
+        path.write_bytes(raw[: 8 + n // 2])
+        said = f"truncated: the header promises at least {8 + n} bytes, the file has {8 + n // 2} (the header itself is cut short)"
+    elif how == "tensor cut":
+        path.write_bytes(raw[:-4])
+        said = f"truncated: the header promises {len(raw)} bytes, the file has {len(raw) - 4}; tensor {last!r} is cut short"
+    elif how == "tensor missing":
+        path.write_bytes(raw[: 8 + n + first])
+        said = f"truncated: the header promises {len(raw)} bytes, the file has {8 + n + first}; tensor {last!r} is missing"
+    elif how == "entry removed":
+        (_, gap_end), removed = spans[0]
+        path.write_bytes(_with_header({k: v for k, v in header.items() if k != removed}, data))
+        said = (
+            f"bytes 0-{gap_end} of its data belong to no tensor of its header (before tensor {spans[1][1]!r}): a tensor's entry is missing"
+        )
+    else:
+        path.write_bytes(raw + b"\0" * 8)
+        said = f"the header accounts for {len(raw)} bytes, the file has {len(raw) + 8}: a tensor's entry is missing, or bytes were added"
+    assert _expect_user_error(path).lines() == [f"{path}: {said}"]
+
+
 def test_non_model_safetensors_is_refused(tmp_path: Path):
     path = tmp_path / "weights.safetensors"
     save_file({"x": np.zeros(3, np.float32)}, str(path))

@@ -47,6 +47,34 @@ def test_info_on_a_foreign_file_is_one_line(tmp_path: Path, capsys, content: byt
     assert len(err) == 1 and str(path) in err[0] and "internal error" not in err[0]
 
 
+def test_info_and_evaluate_on_a_model_cut_short_say_it_is_truncated(tmp_path: Path, capsys):
+    """A file that begins as a safetensors file but was cut short is said to be truncated, with
+    the bytes its header promises, and the tensor lost named; a file that is none keeps the
+    general line."""
+    import struct
+
+    model = linear_model(tmp_path / "m.safetensors")
+    raw = model.read_bytes()
+    n = struct.unpack("<Q", raw[:8])[0]
+    cut = tmp_path / "cut.safetensors"
+    cut.write_bytes(raw[:-4])
+    said = f"{cut}: truncated: the header promises {len(raw)} bytes, the file has {len(raw) - 4}; tensor "
+    for argv in (["info", str(cut)], ["evaluate", str(cut), "gen:7", "--seeds", "1", "--out", str(tmp_path / "ev")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and err[0].startswith(f"error: {said}") and err[0].endswith(" is cut short"), err
+    assert not (tmp_path / "ev").exists()
+    half = tmp_path / "half.safetensors"
+    half.write_bytes(raw[: 8 + n // 2])
+    assert main(["info", str(half)]) == 2
+    cut_header = f"truncated: the header promises at least {8 + n} bytes, the file has {8 + n // 2} (the header itself is cut short)"
+    assert capsys.readouterr().err.splitlines() == [f"error: {half}: {cut_header}"]
+    foreign = tmp_path / "x.safetensors"
+    foreign.write_bytes(b"not safetensors at all")
+    assert main(["info", str(foreign)]) == 2
+    assert capsys.readouterr().err.splitlines() == [f"error: {foreign}: not a terrapref recording, dataset, model or ONNX file"]
+
+
 def test_info_gives_every_ensemble_members_chosen_epoch(tmp_path: Path, capsys):
     data = dataset_file(tmp_path / "d.safetensors")
     model = tmp_path / "m.safetensors"

@@ -181,7 +181,7 @@ def _rules(rules, driving, names: tuple[str, ...], classes, graph_note: bool = F
 
 def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
     """The terrapref metadata of a safetensors file and the shape of each tensor (none is read)."""
-    from terrapref.tensorfile import META_KEY, parse_metadata
+    from terrapref.tensorfile import META_KEY, damage, parse_metadata
 
     if not p.is_file():
         raise UserError(str(p), "no such file or recording folder")
@@ -192,7 +192,7 @@ def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
             header = fh.metadata() or {}
             shapes = {k: tuple(fh.get_slice(k).get_shape()) for k in fh.keys()}
     except (SafetensorError, OSError, ValueError):
-        raise UserError(str(p), "not a terrapref recording, dataset, model or ONNX file") from None
+        raise UserError(str(p), damage(p) or "not a terrapref recording, dataset, model or ONNX file") from None
     if META_KEY not in header:
         raise UserError(str(p), "not a terrapref recording, dataset, model or ONNX file (no terrapref metadata)")
     meta = parse_metadata(header[META_KEY], str(p))
