@@ -574,6 +574,8 @@ def test_validate_notes_what_a_table_is_that_is_no_error(
             "rules.speed.class_max_mps.mud: expected at least 0.1 m/s, the least cruising speed, got -1",
         ),
         ("path_file: nowhere.yaml", "path_file: "),
+        ("rules: {offset: {switch_margin: -5}}", "rules.offset.switch_margin: expected a value >= 0, got -5"),
+        ("rules: {offset: {pursuit_m: 0}}", "rules.offset.pursuit_m: expected a distance > 0 [m], got 0"),
     ],
 )
 def test_validate_refuses_a_robot_file_the_node_would_refuse(

@@ -433,8 +433,8 @@ def test_the_rules_settings_come_from_the_robot_file_then_the_nodes_parameters(s
     assert nested_rule_params(lambda name, default: ros1.get(name, default)) == {"offset.switch_margin": 0.4}
     with pytest.raises(UserError, match=r"^--ros-args: offset.switch_margn: the offset rule has no setting 'switch_margn'"):
         NodeOptions().with_rule_params(RosArgs.parse(["-p", "offset.switch_margn:=0.3"]).rule_params, "--ros-args")
-    with pytest.raises(UserError, match=r"robot.yaml and --ros-args: offset.switch_margin, pursuit_m: .*switch_margin >= 0"):
-        PlannerNodeCore(model, NodeOptions().with_rule_params({"offset.switch_margin": -0.1}, "--ros-args").applied_to(robot), path)
+    with pytest.raises(UserError, match=r"^--ros-args: offset.switch_margin: expected a value >= 0, got -0.1"):  # before any model
+        NodeOptions().with_rule_params({"offset.switch_margin": -0.1}, "--ros-args")
     stopping = NodeOptions().with_rule_params(
         RosArgs.parse(["-p", "stop.decel_mps2:=0.5", "-p", "stop.margin_m:=0.6"]).rule_params, "--ros-args"
     )

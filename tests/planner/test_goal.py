@@ -204,3 +204,12 @@ def test_a_patch_of_lethal_terrain_on_the_path_s_end_is_gone_round_and_the_goal_
     first = reasons.index("goal")
     assert all(r == "goal" for r in reasons[first:]) and not commands[first:, 0].any()
     assert abs(poses[first, 1] - 20.0) <= 0.5 + 0.1 and poses[first, 0] > 29.5  # on the end's line, at or past the end
+
+
+@pytest.mark.parametrize("waypoints", [[[0.0, 0.0], [1e308, 1e308], [-1e308, 5.0]], [[0.0, 0.0], [1e200, 0.0]], [[0.0, 0.0], [2e7, 0.0]]])
+def test_a_path_whose_lengths_would_overflow_is_refused_before_it_is_driven(fast_model, waypoints):
+    """Points past any place on Earth made the progress along the path NaN, and the runtime turned on it."""
+    runtime = PlannerRuntime(fast_model)
+    with pytest.raises(ValueError, match=r"a path's points lie within \+-1e\+07 m of the origin"):
+        runtime.set_path(np.asarray(waypoints))
+    assert ReferencePath(np.array([[0.0, 0.0], [9.9e6, 0.0]])).length_m == pytest.approx(9.9e6)  # UTM coordinates still fit

@@ -10,6 +10,10 @@ import numpy as np
 _SCALAR_SEGMENTS = 24  # project() windows up to this many segments in plain floats
 
 
+FARTHEST_M = 1e7
+"""The farthest a path's point may lie from the origin [m]: UTM coordinates fit, as recordings' poses do."""
+
+
 class ReferencePath:
     """A polyline of waypoints (N, 2) [m] with arc-length parametrisation."""
 
@@ -17,6 +21,8 @@ class ReferencePath:
         wp = np.asarray(waypoints, dtype=float)
         if wp.ndim != 2 or wp.shape[1:] != (2,) or not np.isfinite(wp).all():
             raise ValueError(f"a path is a list of finite (x, y) points, got shape {wp.shape}")
+        if np.abs(wp).max(initial=0.0) > FARTHEST_M:  # its lengths, and the progress along it, would overflow or lose every digit
+            raise ValueError(f"a path's points lie within +-{FARTHEST_M:g} m of the origin (a place on Earth), got {np.abs(wp).max():g}")
         keep = np.ones(len(wp), dtype=bool)
         keep[1:] = np.any(np.diff(wp, axis=0) != 0, axis=1)  # drop repeated points
         self.waypoints = wp[keep]

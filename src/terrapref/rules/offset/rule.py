@@ -299,6 +299,13 @@ class OffsetRule(Rule):
     utility: OffsetUtility
     fit: OffsetFit | None = None
 
+    @classmethod
+    def setting_problem(cls, name: str, value: float) -> str | None:
+        """A distance of 0 or less where the rule needs one ahead, or a margin or tolerance below 0."""
+        if name in ("pursuit_m", "lethal_horizon_m"):
+            return "expected a distance > 0 [m]" if not value > 0 else None
+        return "expected a value >= 0" if value < 0 else None
+
     @property
     def reads_relief(self) -> bool:
         """Whether its utility prices relief (a drive on relief taught it)."""
