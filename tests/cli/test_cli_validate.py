@@ -576,6 +576,7 @@ def test_validate_notes_what_a_table_is_that_is_no_error(
         ("path_file: nowhere.yaml", "path_file: "),
         ("rules: {offset: {switch_margin: -5}}", "rules.offset.switch_margin: expected a value >= 0, got -5"),
         ("rules: {offset: {pursuit_m: 0}}", "rules.offset.pursuit_m: expected a distance > 0 [m], got 0"),
+        ("stop: {decel_mps2: .nan}", "stop: the stop rule's settings must be finite numbers; decel_mps2 is nan"),
     ],
 )
 def test_validate_refuses_a_robot_file_the_node_would_refuse(

@@ -81,8 +81,12 @@ def test_a_path_file_of_no_length_is_refused_naming_it(tmp_path: Path):
 
     path = tmp_path / "route.yaml"
     path.write_text("waypoints: [[1.0, 2.0], [1.0, 2.0]]\n")
-    with pytest.raises(UserError, match="two distinct finite"):
+    with pytest.raises(UserError, match="two distinct finite") as refused:
         load_waypoints(path, "robot.yaml")
+    assert refused.value.lines()[0].startswith(f"robot.yaml: path_file: {path}: ")  # the robot file's field
+    with pytest.raises(UserError) as refused:  # a node's parameter: the file's own error, named once
+        load_waypoints(path, None)
+    assert refused.value.lines()[0].startswith(f"{path}: path_file: expected at least two distinct finite")
 
 
 @pytest.mark.parametrize(

@@ -38,7 +38,8 @@ def import_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--profile",
         help="the driver's preference order, best first, stored with the recording (default: the robot file's "
-        "profile; with neither, the recording declares none and training refuses it)",
+        "profile; with neither, the recording declares none: a model trains from it and names no order, and "
+        "evaluate asks for one)",
     )
     add_classes_arg(p)
     p.set_defaults(func=_cmd_import)

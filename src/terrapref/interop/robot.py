@@ -350,16 +350,22 @@ def _load_labels(ref: str, here: Path, classes: ClassTable, source: str, table_o
         raise ConfigError(source, exc.lines()[0] + whose, field="labels") from None
 
 
-def load_waypoints(path: Path, source: str) -> np.ndarray:
+def load_waypoints(path: Path, source: str | None) -> np.ndarray:
     """Waypoints (N, 2) from a YAML file: a list of [x, y], a mapping with ``waypoints``, or a
-    scenario file (its ``path: waypoints``, as ``terrapref route`` writes)."""
+    scenario file (its ``path: waypoints``, as ``terrapref route`` writes). ``source``: the robot
+    file that names it (its errors are that file's ``path_file``), or None for a node's parameter
+    (they are the path file's own)."""
+
+    def refused(problem: str) -> UserError:
+        return UserError(source, f"{path}: {problem}", field="path_file") if source else UserError(str(path), problem, field="path_file")
+
     data = None
     try:
         data = load_yaml_text(read_capped(path).decode("utf-8"))
     except FileNotFoundError:
-        raise UserError(source, f"{path}: no such file", field="path_file") from None
+        raise refused("no such file") from None
     except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
-        raise UserError(source, f"{path}: unreadable ({exc})", field="path_file") from None
+        raise refused(f"unreadable ({exc})") from None
     if isinstance(data, dict):
         data = data["path"].get("waypoints") if isinstance(data.get("path"), dict) and "waypoints" not in data else data.get("waypoints")
     try:
@@ -369,5 +375,5 @@ def load_waypoints(path: Path, source: str) -> np.ndarray:
     try:
         ReferencePath(points)
     except ValueError:
-        raise UserError(source, f"{path}: expected at least two distinct finite [x, y] waypoints", field="path_file") from None
+        raise refused("expected at least two distinct finite [x, y] waypoints (within +-1e+07 m of the origin)") from None
     return points

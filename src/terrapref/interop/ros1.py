@@ -77,7 +77,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     opts = opts.resolved(rospy.get_param)
     robot = opts.applied_to(robot)
     path = (
-        load_waypoints(Path(opts.path_file), "path_file")
+        load_waypoints(Path(opts.path_file), None)
         if opts.path_file
         else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     )

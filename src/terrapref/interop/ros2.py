@@ -246,7 +246,7 @@ def run_node(
     model = load_model(model_path)
     robot = opts.applied_to(load_robot(robot_path, model.classes, f"the model {model_path}"))
     path = (
-        load_waypoints(Path(opts.path_file), "path_file")
+        load_waypoints(Path(opts.path_file), None)
         if opts.path_file
         else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     )

@@ -132,7 +132,10 @@ class StopConfig:
             *(() if self.goal_yaw_tolerance_deg is None else (self.goal_yaw_tolerance_deg,)),
         )
         if not all(finite_number(v) for v in finite):
-            raise ValueError("the stop rule's settings must be finite numbers")
+            names = ("reaction_s", "decel_mps2", "margin_m", "blind_after_s", "resume_after_s", "seen_share", "look_m", "step_m")
+            names += ("lethal_evidence", "goal_tolerance_m", "off_path_m", "goal_yaw_tolerance_deg")
+            bad = next(name for name, v in zip(names, finite, strict=False) if not finite_number(v))
+            raise ValueError(f"the stop rule's settings must be finite numbers; {bad} is {getattr(self, bad)!r}")
         if self.goal_tolerance_m <= 0 or self.off_path_m <= self.goal_tolerance_m:
             raise ValueError("the stop rule needs goal_tolerance_m > 0 and off_path_m greater than it")
         if self.goal_yaw_tolerance_deg is not None and not 0 < self.goal_yaw_tolerance_deg <= 180:
