@@ -336,9 +336,9 @@ def featurize_features(args: argparse.Namespace, recipe):
 def check_run_folder(out: str | Path, inputs: list) -> None:
     """The one rule for a run's folder (``--out`` of evaluate, replay, select, study and reproduce:
     terrapref.fileio.check_output), and never a recording: only record and import replace one."""
-    from terrapref.demos.recording import FRAMES, META
+    from terrapref.demos.recording import is_recording
     from terrapref.fileio import check_output
 
     check_output(out, "--out", inputs, folder=True)
-    if (Path(out) / META).is_file() and (Path(out) / FRAMES).is_file():
+    if is_recording(Path(out)):
         raise UserError(str(out), "is a recording, which only record and import replace; name a run's folder", field="--out")

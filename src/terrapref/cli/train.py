@@ -69,24 +69,24 @@ def _cmd_train(args: argparse.Namespace) -> int:
     except UserError as exc:  # a rule's configuration in a dataset file: named by the file it came from
         raise UserError(str(args.data[0]), exc.problems) if exc.source == DATASET else exc from None
     except KeyboardInterrupt:
-        if _interrupted_outputs(args.out):
+        if left := _interrupted_outputs(args.out):
             print(
-                f"note: the best epochs so far are in {' and '.join(map(str, _interrupted_outputs(args.out)))} "
-                f"(the model marked interrupted: no decision rules); {args.out} is untouched",
+                f"note: the best epochs so far are in {left} (the model marked interrupted: no decision rules); {args.out} is untouched",
                 file=sys.stderr,
             )
         raise
     _report_training(args, config, data, result)
-    if _interrupted_outputs(args.out):  # an earlier run's, stopped: kept, as every output is, named so as not to be taken for this one's
-        print(f"note: {' and '.join(map(str, _interrupted_outputs(args.out)))}: left by an earlier run that was interrupted; kept")
+    if left := _interrupted_outputs(args.out):  # an earlier, stopped run's: kept, as every output is, and named
+        print(f"note: {left}: left by an earlier run that was interrupted; kept")
     return 0
 
 
-def _interrupted_outputs(out: Path) -> list[Path]:
-    """What an interrupted training leaves beside ``out`` (its model so far, its checkpoints), of those there."""
+def _interrupted_outputs(out: Path) -> str:
+    """What an interrupted training leaves beside ``out`` (its model so far, its checkpoints), of
+    those there, joined by "and"; "" where there is neither."""
     from terrapref.learning.pipeline import checkpoints_path, interrupted_path
 
-    return [p for p in (interrupted_path(out), Path(f"{checkpoints_path(out)}.interrupted")) if p.exists()]
+    return " and ".join(str(p) for p in (interrupted_path(out), Path(f"{checkpoints_path(out)}.interrupted")) if p.exists())
 
 
 def _check_beside(out: Path, inputs: list[Path], force: bool) -> None:

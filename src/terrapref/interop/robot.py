@@ -70,7 +70,7 @@ from terrapref.interop.labels import LabelMap, load_label_map
 from terrapref.planner.stop import StopConfig
 from terrapref.rules import RULES
 from terrapref.rules.settings import RuleSettings
-from terrapref.scenario.path import ReferencePath
+from terrapref.scenario.path import FARTHEST_M, ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import VehicleConfig
@@ -375,5 +375,5 @@ def load_waypoints(path: Path, source: str | None) -> np.ndarray:
     try:
         ReferencePath(points)
     except ValueError:
-        raise refused("expected at least two distinct finite [x, y] waypoints (within +-1e+07 m of the origin)") from None
+        raise refused(f"expected at least two distinct finite [x, y] waypoints (within +-{FARTHEST_M:g} m of the origin)") from None
     return points

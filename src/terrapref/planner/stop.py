@@ -117,24 +117,11 @@ class StopConfig:
     off_path_m: float = 10.0
 
     def __post_init__(self) -> None:
-        finite = (
-            self.reaction_s,
-            self.decel_mps2,
-            self.margin_m,
-            self.blind_after_s,
-            self.resume_after_s,
-            self.seen_share,
-            self.look_m,
-            self.step_m,
-            self.lethal_evidence,
-            self.goal_tolerance_m,
-            self.off_path_m,
-            *(() if self.goal_yaw_tolerance_deg is None else (self.goal_yaw_tolerance_deg,)),
-        )
-        if not all(finite_number(v) for v in finite):
-            names = ("reaction_s", "decel_mps2", "margin_m", "blind_after_s", "resume_after_s", "seen_share", "look_m", "step_m")
-            names += ("lethal_evidence", "goal_tolerance_m", "off_path_m", "goal_yaw_tolerance_deg")
-            bad = next(name for name, v in zip(names, finite, strict=False) if not finite_number(v))
+        names = ("reaction_s", "decel_mps2", "margin_m", "blind_after_s", "resume_after_s", "seen_share", "look_m", "step_m")
+        names += ("lethal_evidence", "goal_tolerance_m", "off_path_m")
+        names += () if self.goal_yaw_tolerance_deg is None else ("goal_yaw_tolerance_deg",)
+        bad = next((name for name in names if not finite_number(getattr(self, name))), None)
+        if bad is not None:
             raise ValueError(f"the stop rule's settings must be finite numbers; {bad} is {getattr(self, bad)!r}")
         if self.goal_tolerance_m <= 0 or self.off_path_m <= self.goal_tolerance_m:
             raise ValueError("the stop rule needs goal_tolerance_m > 0 and off_path_m greater than it")
